@@ -1,0 +1,150 @@
+"""Command-line entry points `dpm-render` and `dpm-train`.
+
+Bad input (InputError) becomes one line on stderr and exit status 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+import tomllib
+import warnings
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from dpm.errors import InputError
+from dpm.io import write_image, write_json
+from dpm.render import COMPONENTS, IMPLEMENTED, PLANNED, RenderOptions, render, validate
+from dpm.scene import load_scene
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports a usage error in one line (exit 2) instead of usage + error."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
+def _run(prog: str, body: Callable[[], None]) -> int:
+    """Run `body`, turning bad input and interrupts into one line and an exit status."""
+
+    def one_line_warning(message, category, filename, lineno, file=None, line=None):  # noqa: ARG001
+        print(f"{prog}: warning: {message}", file=sys.stderr)
+
+    previous = warnings.showwarning
+    warnings.showwarning = one_line_warning
+    try:
+        body()
+    except InputError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted", file=sys.stderr)
+        return 130
+    finally:
+        warnings.showwarning = previous
+    return 0
+
+
+def _render_parser() -> _Parser:
+    p = _Parser(
+        prog="dpm-render",
+        description="Render an OBJ scene (with its MTL and optional TOML sidecar).",
+    )
+    p.add_argument("scene", type=Path, help="scene .obj file")
+    p.add_argument("-o", "--output", type=Path, help="image to write: .exr (linear) or .png")
+    p.add_argument("--method", choices=IMPLEMENTED + PLANNED, help="rendering method")
+    p.add_argument("--spp", type=int, help="samples per pixel")
+    p.add_argument("--photons", type=int, help="emitted photon paths")
+    p.add_argument("--k", type=int, help="nearest photons per estimate")
+    p.add_argument("--seed", type=int, help="random seed (same seed, same image)")
+    p.add_argument("--width", type=int, help="image width in pixels (overrides the scene)")
+    p.add_argument("--height", type=int, help="image height in pixels (overrides the scene)")
+    p.add_argument("--component", choices=COMPONENTS, help="full image or caustics only")
+    p.add_argument("--stats", type=Path, metavar="FILE.json", help="write timings and counts")
+    p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    return p
+
+
+def render_main(argv: Sequence[str] | None = None) -> int:
+    """`dpm-render`: load a scene, render it, write the image (and stats); returns exit status."""
+    args = _render_parser().parse_args(argv)
+
+    def body() -> None:
+        output = args.output or Path(args.scene.stem + ".png")
+        if output.suffix.lower() not in (".png", ".exr"):
+            raise InputError(f"{output}: output must end in .png or .exr")
+        for path in (output, args.stats):
+            if path is not None and not path.resolve().parent.is_dir():
+                raise InputError(f"{path}: output folder does not exist")
+        start = time.perf_counter()
+        scene = load_scene(args.scene)
+        load_seconds = time.perf_counter() - start
+        options = RenderOptions()
+        for key, value in scene.render_defaults.items():
+            if hasattr(options, key):
+                setattr(options, key, value)
+        for key in ("method", "spp", "photons", "k", "seed", "width", "height", "component"):
+            if getattr(args, key) is not None:
+                setattr(options, key, getattr(args, key))
+        options.progress = not args.quiet and sys.stderr.isatty()
+        validate(options)
+        result = render(scene, options)
+        result.stats["seconds"]["load"] = load_seconds
+        start = time.perf_counter()
+        write_image(output, result.image)
+        result.stats["seconds"]["write"] = time.perf_counter() - start
+        result.stats["scene"] = str(args.scene)
+        result.stats["output"] = str(output)
+        if args.stats is not None:
+            write_json(args.stats, result.stats)
+        if not args.quiet:
+            s = result.stats["seconds"]
+            timing = ", ".join(f"{k} {v:.2f}s" for k, v in s.items())
+            print(f"wrote {output} ({result.stats['width']}x{result.stats['height']}): {timing}")
+
+    return _run("dpm-render", body)
+
+
+TRAIN_SECTIONS = {"data", "model", "train"}
+
+
+def _check_train_config(path: Path) -> dict:
+    """Read and validate a training config; its full schema arrives with the training issue."""
+    if not path.is_file():
+        raise InputError(f"{path}: file not found")
+    try:
+        config = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: invalid TOML: {exc}") from None
+    unknown = set(config) - TRAIN_SECTIONS
+    if unknown:
+        raise InputError(f"{path}: unknown section(s) {sorted(unknown)}")
+    for section in sorted(TRAIN_SECTIONS):
+        if not isinstance(config.get(section), dict):
+            raise InputError(f"{path}: missing [{section}] table")
+    k = config["model"].get("k")
+    if not isinstance(k, int) or isinstance(k, bool) or k < 1:
+        raise InputError(f"{path}: [model] 'k' must be a positive integer")
+    return config
+
+
+def train_main(argv: Sequence[str] | None = None) -> int:
+    """`dpm-train`: for now validates the config only and says so; returns exit status."""
+    p = _Parser(prog="dpm-train", description="Train a DPM kernel-prediction network.")
+    p.add_argument("--config", type=Path, required=True, help="training config (.toml)")
+    args = p.parse_args(argv)
+
+    def body() -> None:
+        _check_train_config(args.config)
+        print(
+            f"dpm-train: {args.config} is a valid config; training is not implemented yet "
+            "(it arrives with the learned-estimator issue), so nothing was trained"
+        )
+
+    return _run("dpm-train", body)
+
+
+if __name__ == "__main__":
+    sys.exit(render_main())

@@ -1,0 +1,66 @@
+"""Image and JSON output, written atomically: a temporary file beside the target, then rename."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import imageio.v3 as iio
+import numpy as np
+import OpenEXR
+
+from dpm.errors import InputError
+
+
+@contextlib.contextmanager
+def _atomic(path: Path) -> Iterator[Path]:
+    """Yield a temporary path beside `path`; on success it replaces `path`, else it is removed."""
+    if not path.parent.is_dir():
+        raise InputError(f"{path}: output folder does not exist")
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write: {exc.strerror or exc}") from None
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def linear_to_srgb8(image: np.ndarray) -> np.ndarray:
+    """sRGB-encode linear RGB (H, W, 3) float into (H, W, 3) uint8, clipping to [0, 1]."""
+    x = np.clip(np.nan_to_num(image, nan=0.0, posinf=1.0), 0.0, 1.0)
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    return np.round(srgb * 255).astype(np.uint8)
+
+
+def write_image(path: str | Path, image: np.ndarray) -> None:
+    """Write linear RGB (H, W, 3): float32 OpenEXR when the name ends in .exr, else sRGB PNG."""
+    path = Path(path)
+    image = np.ascontiguousarray(image, dtype=np.float32)
+    with _atomic(path) as tmp:
+        if path.suffix.lower() == ".exr":
+            header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+            with OpenEXR.File(header, {"RGB": image}) as exr:
+                exr.write(str(tmp))
+        else:
+            iio.imwrite(tmp, linear_to_srgb8(image), extension=".png")
+
+
+def read_exr(path: str | Path) -> np.ndarray:
+    """Read an RGB OpenEXR file written by `write_image` into (H, W, 3) float32."""
+    with OpenEXR.File(str(path)) as exr:
+        return np.asarray(exr.channels()["RGB"].pixels, dtype=np.float32)
+
+
+def write_json(path: str | Path, data: dict) -> None:
+    """Write a JSON document (e.g. render statistics)."""
+    path = Path(path)
+    with _atomic(path) as tmp:
+        tmp.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")

@@ -1,0 +1,169 @@
+"""Wavefront OBJ and MTL text parsing into plain arrays and dictionaries.
+
+We parse by hand instead of through trimesh because trimesh drops the MTL fields the scene
+format needs (Ke, Ni, Tf, illum), merges vertices and reorders faces, and cannot point at the
+offending line of a malformed file.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from dpm.errors import InputError
+
+# Statements that carry nothing dpm renders (texture coordinates, normals, grouping, smoothing).
+_OBJ_IGNORED = {"vt", "vn", "vp", "o", "g", "s", "l", "p", "mg"}
+_MTL_IGNORED = {"Ns", "Ka", "d", "Tr", "Pr", "Pm", "Ps", "Pc", "Pcr", "aniso", "anisor", "sharpness"}
+
+
+@dataclass
+class ObjMesh:
+    """Triangles of one OBJ file: vertex positions, fan-triangulated faces and material names."""
+
+    vertices: np.ndarray  # (V, 3) float64 positions as written
+    faces: np.ndarray  # (T, 3) int64 zero-based vertex indices
+    face_material: np.ndarray  # (T,) int32 index into material_names, -1 = no usemtl
+    material_names: list[str] = field(default_factory=list)
+    mtllibs: list[Path] = field(default_factory=list)
+
+
+@dataclass
+class MtlEntry:
+    """The fields of one `newmtl` block that dpm reads; None where the file does not set them."""
+
+    name: str
+    kd: tuple[float, float, float] | None = None
+    ks: tuple[float, float, float] | None = None
+    ke: tuple[float, float, float] | None = None
+    tf: tuple[float, float, float] | None = None
+    ni: float | None = None
+    illum: int | None = None
+
+
+def _read_lines(path: Path) -> list[str]:
+    if not path.is_file():
+        raise InputError(f"{path}: file not found")
+    try:
+        return path.read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read: {exc.strerror}") from None
+
+
+def _floats(path: Path, lineno: int, words: list[str], counts: tuple[int, ...]) -> list[float]:
+    if len(words) - 1 not in counts:
+        want = " or ".join(str(c) for c in counts)
+        raise InputError(f"{path}:{lineno}: '{words[0]}' needs {want} numbers, got {words[1:]}")
+    try:
+        return [float(w) for w in words[1:]]
+    except ValueError:
+        raise InputError(f"{path}:{lineno}: '{words[0]}' has a value that is not a number") from None
+
+
+def _rgb(path: Path, lineno: int, words: list[str]) -> tuple[float, float, float]:
+    values = _floats(path, lineno, words, (1, 3))
+    rgb = (values[0],) * 3 if len(values) == 1 else tuple(values)
+    if not all(math.isfinite(v) and v >= 0 for v in rgb):
+        raise InputError(f"{path}:{lineno}: '{words[0]}' must be finite and non-negative")
+    return rgb  # type: ignore[return-value]
+
+
+def read_obj(path: Path) -> ObjMesh:
+    """Parse an OBJ file into vertices (V,3), triangles (T,3) and per-triangle material names."""
+    vertices: list[list[float]] = []
+    faces: list[tuple[int, int, int]] = []
+    face_material: list[int] = []
+    names: list[str] = []
+    name_index: dict[str, int] = {}
+    mtllibs: list[Path] = []
+    current = -1
+    for lineno, raw in enumerate(_read_lines(path), start=1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        words = line.split()
+        key = words[0]
+        if key == "v":
+            # A fourth (w) or extra colour values are allowed by common exporters; keep x, y, z.
+            if len(words) < 4:
+                raise InputError(f"{path}:{lineno}: vertex needs 3 coordinates")
+            try:
+                vertices.append([float(w) for w in words[1:4]])
+            except ValueError:
+                raise InputError(f"{path}:{lineno}: vertex coordinate is not a number") from None
+        elif key == "f":
+            if len(words) < 4:
+                raise InputError(f"{path}:{lineno}: face needs at least 3 vertices")
+            idx = []
+            for w in words[1:]:
+                try:
+                    i = int(w.split("/", 1)[0])
+                except ValueError:
+                    raise InputError(f"{path}:{lineno}: bad face vertex '{w}'") from None
+                i = i - 1 if i > 0 else len(vertices) + i
+                if i < 0 or i >= len(vertices):
+                    raise InputError(f"{path}:{lineno}: face vertex '{w}' out of range")
+                idx.append(i)
+            for j in range(1, len(idx) - 1):  # fan triangulation, keeps the winding
+                faces.append((idx[0], idx[j], idx[j + 1]))
+                face_material.append(current)
+        elif key == "usemtl":
+            if len(words) < 2:
+                raise InputError(f"{path}:{lineno}: usemtl needs a material name")
+            name = " ".join(words[1:])
+            current = name_index.setdefault(name, len(names))
+            if current == len(names):
+                names.append(name)
+        elif key == "mtllib":
+            if len(words) < 2:
+                raise InputError(f"{path}:{lineno}: mtllib needs a file name")
+            mtllibs.append(path.parent / " ".join(words[1:]))
+        elif key not in _OBJ_IGNORED:
+            raise InputError(f"{path}:{lineno}: unsupported OBJ statement '{key}'")
+    return ObjMesh(
+        vertices=np.asarray(vertices, dtype=np.float64).reshape(-1, 3),
+        faces=np.asarray(faces, dtype=np.int64).reshape(-1, 3),
+        face_material=np.asarray(face_material, dtype=np.int32),
+        material_names=names,
+        mtllibs=mtllibs,
+    )
+
+
+def read_mtl(path: Path) -> dict[str, MtlEntry]:
+    """Parse an MTL file into its materials by name, keeping only the fields dpm uses."""
+    entries: dict[str, MtlEntry] = {}
+    entry: MtlEntry | None = None
+    for lineno, raw in enumerate(_read_lines(path), start=1):
+        line = raw.split("#", 1)[0].strip()
+        if not line:
+            continue
+        words = line.split()
+        key = words[0]
+        if key == "newmtl":
+            if len(words) < 2:
+                raise InputError(f"{path}:{lineno}: newmtl needs a name")
+            entry = MtlEntry(name=" ".join(words[1:]))
+            entries[entry.name] = entry
+            continue
+        if key in _MTL_IGNORED or key.startswith(("map_", "bump", "disp", "decal", "refl", "norm")):
+            continue
+        if entry is None:
+            raise InputError(f"{path}:{lineno}: '{key}' before any newmtl")
+        if key in ("Kd", "Ks", "Ke", "Tf"):
+            setattr(entry, key.lower(), _rgb(path, lineno, words))
+        elif key == "Ni":
+            (ni,) = _floats(path, lineno, words, (1,))
+            if not (math.isfinite(ni) and ni > 0):
+                raise InputError(f"{path}:{lineno}: Ni must be a positive number")
+            entry.ni = ni
+        elif key == "illum":
+            (value,) = _floats(path, lineno, words, (1,))
+            if value != int(value) or not 0 <= value <= 10:
+                raise InputError(f"{path}:{lineno}: illum must be an integer 0..10")
+            entry.illum = int(value)
+        else:
+            raise InputError(f"{path}:{lineno}: unsupported MTL statement '{key}'")
+    return entries

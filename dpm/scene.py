@@ -1,0 +1,269 @@
+"""Scenes: loading OBJ + MTL + TOML sidecar into flat float32 arrays, with validation.
+
+See DESIGN.md "Scene format". Material kinds: DIFFUSE (two-sided Lambertian), MIRROR (two-sided
+perfect mirror with reflectance Ks), DIELECTRIC (smooth, IOR Ni inside, air on the front side).
+Any material with non-zero Ke is also a one-sided Lambertian emitter (front face).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from dpm.camera import Camera, framing_camera, make_camera
+from dpm.errors import InputError
+from dpm.obj import MtlEntry, read_mtl, read_obj
+
+DIFFUSE, MIRROR, DIELECTRIC = 0, 1, 2
+KIND_NAMES = ("diffuse", "mirror", "dielectric")
+
+# `[render]` keys a sidecar may set, with their types; dpm-render flags override them.
+RENDER_KEYS: dict[str, type] = {
+    "method": str,
+    "spp": int,
+    "photons": int,
+    "k": int,
+    "seed": int,
+    "radius": float,
+    "photons_per_pass": int,
+    "component": str,
+}
+
+
+@dataclass(frozen=True)
+class Materials:
+    """Material table, one row per material (struct of arrays)."""
+
+    names: tuple[str, ...]
+    kind: np.ndarray  # (M,) int32: DIFFUSE, MIRROR or DIELECTRIC
+    albedo: np.ndarray  # (M, 3) float32 Lambertian reflectance Kd
+    specular: np.ndarray  # (M, 3) float32 mirror reflectance Ks
+    emission: np.ndarray  # (M, 3) float32 emitted radiance Ke (W m^-2 sr^-1)
+    ior: np.ndarray  # (M,) float32 index of refraction inside a dielectric
+    transmittance: np.ndarray  # (M, 3) float32 Tf, applied at every refraction
+
+
+@dataclass(frozen=True)
+class Emitters:
+    """Emitting triangles and the distribution that samples them proportionally to power."""
+
+    triangles: np.ndarray  # (E,) int32 scene triangle indices
+    radiance: np.ndarray  # (E, 3) float32 emitted radiance Ke
+    power: np.ndarray  # (E, 3) float64 emitted flux π·A·Ke (W)
+    cdf: np.ndarray  # (E,) float64 cumulative probability by mean RGB power, last = 1
+
+    @property
+    def total_power(self) -> np.ndarray:
+        """(3,) float64 flux of all emitters (W)."""
+        return self.power.sum(axis=0)
+
+
+class SceneArrays(NamedTuple):
+    """The arrays of a Scene that Numba kernels read, per triangle and per material."""
+
+    triangles: np.ndarray  # (T, 3, 3) float32 vertex positions
+    normals: np.ndarray  # (T, 3) float32 unit front normals
+    areas: np.ndarray  # (T,) float32
+    material: np.ndarray  # (T,) int32
+    kind: np.ndarray  # (M,) int32
+    albedo: np.ndarray  # (M, 3) float32
+    specular: np.ndarray  # (M, 3) float32
+    emission: np.ndarray  # (M, 3) float32
+    ior: np.ndarray  # (M,) float32
+    transmittance: np.ndarray  # (M, 3) float32
+    emitter_triangles: np.ndarray  # (E,) int32
+    emitter_cdf: np.ndarray  # (E,) float64
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A loaded scene: flat triangle arrays, materials, emitters and camera."""
+
+    path: Path
+    triangles: np.ndarray  # (T, 3, 3) float32 vertex positions, counter-clockwise = front
+    normals: np.ndarray  # (T, 3) float32 unit geometric (front) normals
+    areas: np.ndarray  # (T,) float32 triangle areas
+    material: np.ndarray  # (T,) int32 index into `materials`
+    materials: Materials
+    emitters: Emitters
+    camera: Camera
+    render_defaults: dict[str, object] = field(default_factory=dict)
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """(2, 3) float64 axis-aligned bounding box: minimum and maximum corner."""
+        flat = self.triangles.reshape(-1, 3)
+        return np.stack([flat.min(axis=0), flat.max(axis=0)]).astype(np.float64)
+
+    def kernel_arrays(self) -> SceneArrays:
+        """The scene as a tuple of plain arrays for Numba kernels."""
+        m, e = self.materials, self.emitters
+        return SceneArrays(
+            self.triangles,
+            self.normals,
+            self.areas,
+            self.material,
+            m.kind,
+            m.albedo,
+            m.specular,
+            m.emission,
+            m.ior,
+            m.transmittance,
+            e.triangles,
+            e.cdf,
+        )
+
+    @property
+    def extent(self) -> float:
+        """Length of the bounding box diagonal (scene units)."""
+        lo, hi = self.bounds
+        return float(np.linalg.norm(hi - lo))
+
+
+def _material_table(names: list[str], library: dict[str, MtlEntry], obj_path: Path) -> Materials:
+    kinds, albedo, specular, emission, ior, tf = [], [], [], [], [], []
+    for name in names:
+        if name == "":
+            entry = MtlEntry(name="")  # faces before any usemtl: default diffuse
+        elif name in library:
+            entry = library[name]
+        else:
+            raise InputError(f"{obj_path}: material '{name}' is not defined in any mtllib")
+        ke = entry.ke or (0.0, 0.0, 0.0)
+        emissive = any(v > 0 for v in ke)
+        if entry.illum in (3, 5):
+            kind = MIRROR
+        elif entry.illum in (4, 6, 7):
+            kind = DIELECTRIC
+        else:
+            kind = DIFFUSE
+        kinds.append(kind)
+        albedo.append(entry.kd or ((0.0,) * 3 if emissive else (0.8,) * 3))
+        specular.append(entry.ks or (1.0,) * 3)
+        emission.append(ke)
+        ior.append(entry.ni if entry.ni is not None else 1.5)
+        tf.append(entry.tf or (1.0,) * 3)
+    f32 = np.float32
+    return Materials(
+        names=tuple(names),
+        kind=np.asarray(kinds, dtype=np.int32),
+        albedo=np.asarray(albedo, dtype=f32).reshape(-1, 3),
+        specular=np.asarray(specular, dtype=f32).reshape(-1, 3),
+        emission=np.asarray(emission, dtype=f32).reshape(-1, 3),
+        ior=np.asarray(ior, dtype=f32),
+        transmittance=np.asarray(tf, dtype=f32).reshape(-1, 3),
+    )
+
+
+def _emitters(
+    triangles: np.ndarray, areas: np.ndarray, material: np.ndarray, materials: Materials
+) -> Emitters:
+    radiance = materials.emission[material]
+    ids = np.flatnonzero(radiance.max(axis=1) > 0).astype(np.int32)
+    power = math.pi * areas[ids, None].astype(np.float64) * radiance[ids].astype(np.float64)
+    weight = power.mean(axis=1)
+    cdf = np.cumsum(weight)
+    if len(cdf):
+        cdf /= cdf[-1]
+        cdf[-1] = 1.0
+    return Emitters(triangles=ids, radiance=radiance[ids], power=power, cdf=cdf)
+
+
+def _read_sidecar(path: Path, lo: np.ndarray, hi: np.ndarray) -> tuple[Camera, dict[str, object]]:
+    if not path.exists():
+        return framing_camera(lo, hi), {}
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: invalid TOML: {exc}") from None
+    unknown = set(data) - {"camera", "render"}
+    if unknown:
+        raise InputError(f"{path}: unknown section(s) {sorted(unknown)}")
+    camera = framing_camera(lo, hi)
+    if "camera" in data:
+        cam = data["camera"]
+        allowed = {"origin", "target", "up", "fov", "width", "height"}
+        if not isinstance(cam, dict) or set(cam) - allowed:
+            bad = sorted(set(cam) - allowed) if isinstance(cam, dict) else cam
+            raise InputError(f"{path}: [camera] has unknown key(s) {bad}")
+        if "origin" not in cam or "target" not in cam:
+            raise InputError(f"{path}: [camera] needs 'origin' and 'target'")
+        camera = make_camera(**cam, where=f"{path}: [camera]")
+    render = data.get("render", {})
+    if not isinstance(render, dict):
+        raise InputError(f"{path}: [render] must be a table")
+    for key, value in render.items():
+        want = RENDER_KEYS.get(key)
+        if want is None:
+            raise InputError(f"{path}: [render] has unknown key '{key}'")
+        ok = isinstance(value, want) and not isinstance(value, bool)
+        if want is float:
+            ok = isinstance(value, int | float) and not isinstance(value, bool)
+        if not ok:
+            raise InputError(f"{path}: [render] '{key}' must be of type {want.__name__}")
+    return camera, dict(render)
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Load `scene.obj`, its MTL libraries and the optional `scene.toml` sidecar beside it."""
+    path = Path(path)
+    if path.suffix.lower() != ".obj":
+        raise InputError(f"{path}: expected a .obj scene file")
+    mesh = read_obj(path)
+    library: dict[str, MtlEntry] = {}
+    for lib in mesh.mtllibs:
+        library.update(read_mtl(lib))
+    if len(mesh.faces) == 0:
+        raise InputError(f"{path}: the scene has no faces")
+
+    names = list(mesh.material_names)
+    face_material = mesh.face_material.copy()
+    if np.any(face_material < 0):  # faces before the first usemtl get the default material
+        face_material[face_material < 0] = len(names)
+        names.append("")
+    materials = _material_table(names, library, path)
+
+    tri64 = mesh.vertices[mesh.faces]  # (T, 3, 3)
+    tri = tri64.astype(np.float32)
+    finite = np.all(np.isfinite(tri), axis=(1, 2)) & np.all(np.abs(tri64) < 1e30, axis=(1, 2))
+    t64 = tri.astype(np.float64)
+    cross = np.cross(t64[:, 1] - t64[:, 0], t64[:, 2] - t64[:, 0])
+    double_area = np.linalg.norm(np.where(finite[:, None], cross, 0.0), axis=1)
+    edges = np.where(finite[:, None, None], t64 - np.roll(t64, 1, axis=1), 0.0)
+    longest2 = np.max(np.sum(edges * edges, axis=2), axis=1)
+    # Slivers whose smallest angle is below ~1e-9 rad have no meaningful normal: drop them too.
+    keep = finite & (double_area > 1e-9 * longest2)
+    if not keep.all():
+        warnings.warn(
+            f"{path}: dropped {np.count_nonzero(~keep)} degenerate, NaN or infinite triangle(s)",
+            stacklevel=2,
+        )
+    if not keep.any():
+        raise InputError(f"{path}: no valid triangles left (all degenerate, NaN or infinite)")
+    tri, cross, double_area = tri[keep], cross[keep], double_area[keep]
+    material = face_material[keep].astype(np.int32)
+    normals = (cross / double_area[:, None]).astype(np.float32)
+    areas = (0.5 * double_area).astype(np.float32)
+
+    emitters = _emitters(tri, areas, material, materials)
+    if len(emitters.triangles) == 0:
+        raise InputError(f"{path}: the scene has no emitter (no material with non-zero Ke)")
+    flat = tri.reshape(-1, 3).astype(np.float64)
+    camera, render = _read_sidecar(path.with_suffix(".toml"), flat.min(0), flat.max(0))
+    return Scene(
+        path=path,
+        triangles=np.ascontiguousarray(tri),
+        normals=normals,
+        areas=areas,
+        material=material,
+        materials=materials,
+        emitters=emitters,
+        camera=camera,
+        render_defaults=render,
+    )

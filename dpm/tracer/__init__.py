@@ -1,0 +1,77 @@
+"""Numba ray tracing: BVH build, closest-hit and occlusion queries over arrays of rays."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dpm.scene import Scene
+from dpm.tracer.bvh import BVH, BVHArrays, build_bvh_from_triangles
+from dpm.tracer.traverse import any_hit_batch, brute_force_batch, closest_hit_batch
+
+__all__ = ["BVH", "BVHArrays", "build_bvh", "intersect", "intersect_brute_force", "occluded"]
+
+
+def build_bvh(scene: Scene | np.ndarray) -> BVH:
+    """Build a BVH over a Scene's triangles, or over a (T, 3, 3) array of vertex positions."""
+    triangles = scene.triangles if isinstance(scene, Scene) else scene
+    return build_bvh_from_triangles(triangles)
+
+
+def _rays(
+    origins: np.ndarray, directions: np.ndarray, tmax: float | np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    o = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
+    d = np.ascontiguousarray(directions, dtype=np.float64).reshape(-1, 3)
+    if o.shape != d.shape:
+        raise ValueError(f"origins {o.shape} and directions {d.shape} differ in shape")
+    if not (np.all(np.isfinite(o)) and np.all(np.isfinite(d))):
+        raise ValueError("ray origins and directions must be finite")
+    if np.any(np.all(d == 0, axis=1)):
+        raise ValueError("ray directions must be non-zero")
+    t = np.full(len(o), np.inf) if tmax is None else np.broadcast_to(tmax, (len(o),))
+    return o, d, np.ascontiguousarray(t, dtype=np.float64)
+
+
+def intersect(
+    bvh: BVH,
+    origins: np.ndarray,
+    directions: np.ndarray,
+    tmax: float | np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Closest hits of rays (R, 3): t (R,) float64 in units of |direction| and triangle (R,) int32.
+
+    Hits count for 0 < t < tmax; a miss has t = inf and triangle index -1.
+    """
+    o, d, tm = _rays(origins, directions, tmax)
+    t = np.empty(len(o))
+    tri = np.empty(len(o), np.int32)
+    closest_hit_batch(bvh.arrays, bvh.depth, o, d, tm, t, tri)
+    return t, tri
+
+
+def occluded(
+    bvh: BVH,
+    origins: np.ndarray,
+    directions: np.ndarray,
+    tmax: float | np.ndarray | None = None,
+) -> np.ndarray:
+    """(R,) bool: whether each ray hits any triangle with 0 < t < tmax."""
+    o, d, tm = _rays(origins, directions, tmax)
+    out = np.empty(len(o), np.bool_)
+    any_hit_batch(bvh.arrays, bvh.depth, o, d, tm, out)
+    return out
+
+
+def intersect_brute_force(
+    triangles: np.ndarray,
+    origins: np.ndarray,
+    directions: np.ndarray,
+    tmax: float | np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """`intersect` without a BVH, testing every triangle (T, 3, 3): the reference for tests."""
+    o, d, tm = _rays(origins, directions, tmax)
+    verts = np.ascontiguousarray(triangles, dtype=np.float32).reshape(-1, 9)
+    t = np.empty(len(o))
+    tri = np.empty(len(o), np.int32)
+    brute_force_batch(verts, o, d, tm, t, tri)
+    return t, tri

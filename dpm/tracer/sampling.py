@@ -1,0 +1,53 @@
+"""Counter-based random numbers and the sampling routines built on them.
+
+A random number is a hash of (seed, stream, dimension): a stream is e.g. a pixel sample or a
+photon path, a dimension one decision along it. No generator state is shared between threads,
+so results do not depend on the thread count or on the order of work.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_M1 = np.uint64(0xBF58476D1CE4E5B9)
+_M2 = np.uint64(0x94D049BB133111EB)
+_S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(11)
+
+
+@nb.njit(cache=True, inline="always")
+def mix64(x):
+    """SplitMix64 finaliser: a bijective avalanche of a uint64."""
+    x = (x ^ (x >> _S30)) * _M1
+    x = (x ^ (x >> _S27)) * _M2
+    return x ^ (x >> _S31)
+
+
+@nb.njit(cache=True, inline="always")
+def uniform(seed, stream, dim):
+    """A uniform float64 in [0, 1) determined by (seed, stream, dim), all non-negative ints."""
+    h = mix64(np.uint64(seed) * _GOLDEN + np.uint64(stream))
+    h = mix64(h + np.uint64(dim) * _GOLDEN)
+    return np.float64(h >> _S11) * (1.0 / 9007199254740992.0)
+
+
+@nb.njit(cache=True, inline="always")
+def sample_cdf(cdf, u):
+    """Index i with probability cdf[i] - cdf[i-1], for u in [0, 1)."""
+    i = np.searchsorted(cdf, u, side="right")
+    return min(i, cdf.shape[0] - 1)
+
+
+@nb.njit(cache=True, inline="always")
+def sample_triangle(tri, u1, u2):
+    """A point (x, y, z) uniform by area on triangle tri (3, 3)."""
+    s = math.sqrt(u1)
+    b0, b1 = 1.0 - s, u2 * s
+    b2 = 1.0 - b0 - b1
+    x = b0 * tri[0, 0] + b1 * tri[1, 0] + b2 * tri[2, 0]
+    y = b0 * tri[0, 1] + b1 * tri[1, 1] + b2 * tri[2, 1]
+    z = b0 * tri[0, 2] + b1 * tri[1, 2] + b2 * tri[2, 2]
+    return x, y, z
