@@ -17,7 +17,20 @@ from dpm.errors import InputError
 
 # Statements that carry nothing dpm renders (texture coordinates, normals, grouping, smoothing).
 _OBJ_IGNORED = {"vt", "vn", "vp", "o", "g", "s", "l", "p", "mg"}
-_MTL_IGNORED = {"Ns", "Ka", "d", "Tr", "Pr", "Pm", "Ps", "Pc", "Pcr", "aniso", "anisor", "sharpness"}
+_MTL_IGNORED = {
+    "Ns",
+    "Ka",
+    "d",
+    "Tr",
+    "Pr",
+    "Pm",
+    "Ps",
+    "Pc",
+    "Pcr",
+    "aniso",
+    "anisor",
+    "sharpness",
+}
 
 
 @dataclass
@@ -60,7 +73,9 @@ def _floats(path: Path, lineno: int, words: list[str], counts: tuple[int, ...]) 
     try:
         return [float(w) for w in words[1:]]
     except ValueError:
-        raise InputError(f"{path}:{lineno}: '{words[0]}' has a value that is not a number") from None
+        raise InputError(
+            f"{path}:{lineno}: '{words[0]}' has a value that is not a number"
+        ) from None
 
 
 def _rgb(path: Path, lineno: int, words: list[str]) -> tuple[float, float, float]:

@@ -210,6 +210,20 @@ def _read_sidecar(path: Path, lo: np.ndarray, hi: np.ndarray) -> tuple[Camera, d
     return camera, dict(render)
 
 
+def _valid_triangles(
+    tri: np.ndarray, tri64: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(keep (T,) bool, cross (T, 3), twice the area (T,)) for float32 triangles (T, 3, 3)."""
+    finite = np.all(np.isfinite(tri), axis=(1, 2)) & np.all(np.abs(tri64) < 1e30, axis=(1, 2))
+    t64 = np.where(finite[:, None, None], tri.astype(np.float64), 0.0)
+    cross = np.cross(t64[:, 1] - t64[:, 0], t64[:, 2] - t64[:, 0])
+    double_area = np.linalg.norm(cross, axis=1)
+    edges = t64 - np.roll(t64, 1, axis=1)
+    longest2 = np.max(np.sum(edges * edges, axis=2), axis=1)
+    # Slivers whose smallest angle is below ~1e-9 rad have no meaningful normal: drop them too.
+    return finite & (double_area > 1e-9 * longest2), cross, double_area
+
+
 def load_scene(path: str | Path) -> Scene:
     """Load `scene.obj`, its MTL libraries and the optional `scene.toml` sidecar beside it."""
     path = Path(path)
@@ -230,15 +244,9 @@ def load_scene(path: str | Path) -> Scene:
     materials = _material_table(names, library, path)
 
     tri64 = mesh.vertices[mesh.faces]  # (T, 3, 3)
-    tri = tri64.astype(np.float32)
-    finite = np.all(np.isfinite(tri), axis=(1, 2)) & np.all(np.abs(tri64) < 1e30, axis=(1, 2))
-    t64 = tri.astype(np.float64)
-    cross = np.cross(t64[:, 1] - t64[:, 0], t64[:, 2] - t64[:, 0])
-    double_area = np.linalg.norm(np.where(finite[:, None], cross, 0.0), axis=1)
-    edges = np.where(finite[:, None, None], t64 - np.roll(t64, 1, axis=1), 0.0)
-    longest2 = np.max(np.sum(edges * edges, axis=2), axis=1)
-    # Slivers whose smallest angle is below ~1e-9 rad have no meaningful normal: drop them too.
-    keep = finite & (double_area > 1e-9 * longest2)
+    with np.errstate(invalid="ignore", over="ignore"):  # NaN/inf triangles are dropped below
+        tri = tri64.astype(np.float32)
+        keep, cross, double_area = _valid_triangles(tri, tri64)
     if not keep.all():
         warnings.warn(
             f"{path}: dropped {np.count_nonzero(~keep)} degenerate, NaN or infinite triangle(s)",

@@ -136,9 +136,9 @@ def _build(tri_lo, tri_hi, centroid, n_bins, max_leaf, traversal_cost):
                 if lc == 0 or right_count[b] == 0:
                     continue
                 left_area = _half_area(llo[0], llo[1], llo[2], lhi[0], lhi[1], lhi[2])
-                cost = traversal_cost + (
-                    lc * left_area + right_count[b] * right_area[b]
-                ) / max(parent_area, 1e-300)
+                cost = traversal_cost + (lc * left_area + right_count[b] * right_area[b]) / max(
+                    parent_area, 1e-300
+                )
                 if cost < best_cost:
                     best_cost, best_axis, best_split = cost, a, b
         if n <= max_leaf and (best_axis < 0 or best_cost >= n):

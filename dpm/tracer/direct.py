@@ -21,7 +21,9 @@ DIMS_PER_BOUNCE = 4  # random numbers one vertex may use: emitter, two for its p
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
-def render_direct_rows(bvh, depth, sc, cam, width, height, row0, row1, spp, seed, eps, max_depth, out):
+def render_direct_rows(
+    bvh, depth, sc, cam, width, height, row0, row1, spp, seed, eps, max_depth, out
+):
     """Mean radiance of spp samples for image rows row0..row1-1 into out (rows, width, 3)."""
     inv_pi = 1.0 / math.pi
     for p in nb.prange((row1 - row0) * width):
@@ -61,7 +63,9 @@ def render_direct_rows(bvh, depth, sc, cam, width, height, row0, row1, spp, seed
                     lt = sc.emitter_triangles[e]
                     pick = sc.emitter_cdf[e] - (sc.emitter_cdf[e - 1] if e > 0 else 0.0)
                     qx, qy, qz = sample_triangle(
-                        sc.triangles[lt], uniform(seed, stream, dim + 1), uniform(seed, stream, dim + 2)
+                        sc.triangles[lt],
+                        uniform(seed, stream, dim + 1),
+                        uniform(seed, stream, dim + 2),
                     )
                     wx, wy, wz = qx - px, qy - py, qz - pz
                     dist2 = wx * wx + wy * wy + wz * wz
@@ -82,7 +86,11 @@ def render_direct_rows(bvh, depth, sc, cam, width, height, row0, row1, spp, seed
                     break
                 if kind == MIRROR:
                     dx, dy, dz = reflect(dx, dy, dz, nx, ny, nz)
-                    tr, tg, tb = tr * sc.specular[m, 0], tg * sc.specular[m, 1], tb * sc.specular[m, 2]
+                    tr, tg, tb = (
+                        tr * sc.specular[m, 0],
+                        tg * sc.specular[m, 1],
+                        tb * sc.specular[m, 2],
+                    )
                     ox, oy, oz = px + eps * nx, py + eps * ny, pz + eps * nz
                 elif kind == DIELECTRIC:
                     eta = sc.ior[m] if front else 1.0 / sc.ior[m]

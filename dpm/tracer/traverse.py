@@ -192,7 +192,9 @@ def closest_hit_batch(bvh, depth, origins, directions, tmax, out_t, out_tri):
         stack = new_stack(depth)
         for r in range(task * RAYS_PER_TASK, min(n, (task + 1) * RAYS_PER_TASK)):
             o, d = origins[r], directions[r]
-            out_t[r], out_tri[r] = closest_hit(bvh, o[0], o[1], o[2], d[0], d[1], d[2], tmax[r], stack)
+            out_t[r], out_tri[r] = closest_hit(
+                bvh, o[0], o[1], o[2], d[0], d[1], d[2], tmax[r], stack
+            )
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
