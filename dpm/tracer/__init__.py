@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from dpm.scene import Scene
+from dpm.tracer import _cache  # noqa: F401  (first: drops stale compiled kernels)
 from dpm.tracer.bvh import BVH, BVHArrays, build_bvh_from_triangles
 from dpm.tracer.traverse import any_hit_batch, brute_force_batch, closest_hit_batch
 

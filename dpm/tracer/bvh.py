@@ -1,7 +1,10 @@
-"""Bounding volume hierarchy over triangles: binned-SAH build into flat, depth-first node arrays.
+"""Bounding volume hierarchy over triangles: binned-SAH build into flat node arrays.
 
-Layout: node i's left child is i + 1, its right child is `child[i]`; a leaf has `count[i] > 0`
-and holds triangles `first = child[i] ... first + count[i] - 1` of `tri_verts` (BVH order).
+Layout: only interior nodes are stored, each as one 64-byte record (one cache line) holding
+the boxes of both children: columns 0–11 as float32 (left min, max xyz; right min, max xyz)
+and columns 12–15 as int32. For child c in (0, 1) of node i, `kids[i, 14 + c]` is 0 when the
+child is an interior node with index `kids[i, 12 + c]`, or the triangle count of a leaf whose
+triangles are rows `kids[i, 12 + c] ...` of `tri_verts` (BVH order). Node 0 is the root.
 """
 
 from __future__ import annotations
@@ -20,9 +23,8 @@ TRAVERSAL_COST = 1.0  # SAH cost of one box test relative to one triangle test
 class BVHArrays(NamedTuple):
     """The arrays Numba kernels traverse; pass `bvh.arrays` into any tracer kernel."""
 
-    bounds: np.ndarray  # (nodes, 6) float32: min xyz, max xyz
-    child: np.ndarray  # (nodes,) int32: right child (interior) or first triangle (leaf)
-    count: np.ndarray  # (nodes,) int32: 0 for interior nodes, triangle count for leaves
+    bounds: np.ndarray  # (nodes, 16) float32 view of the node records (columns 0–11 used)
+    kids: np.ndarray  # (nodes, 16) int32 view of the same memory (columns 12–15 used)
     tri_verts: np.ndarray  # (T, 9) float32 triangle vertices v0, v1, v2 in BVH order
     tri_index: np.ndarray  # (T,) int32 scene triangle index of each BVH-order triangle
 
@@ -36,8 +38,8 @@ class BVH:
 
     @property
     def n_nodes(self) -> int:
-        """Number of nodes (interior and leaves)."""
-        return len(self.arrays.count)
+        """Number of interior nodes (each also holds its children's boxes)."""
+        return len(self.arrays.kids)
 
 
 @nb.njit(cache=True)
@@ -167,6 +169,36 @@ def _build(tri_lo, tri_hi, centroid, n_bins, max_leaf, traversal_cost):
     return bounds[:n_nodes].copy(), child[:n_nodes].copy(), count[:n_nodes].copy(), order, max_depth
 
 
+@nb.njit(cache=True)
+def _pack(bounds, child, count):
+    """Depth-first nodes (left = i + 1, right = child[i]) into the two-boxes-per-node layout."""
+    n = bounds.shape[0]
+    if count[0] > 0:  # the root is a leaf: one node whose two children are that same leaf
+        packed = np.empty((1, 12), np.float32)
+        packed[0, :6] = bounds[0]
+        packed[0, 6:] = bounds[0]
+        kids = np.array([[child[0], child[0], count[0], count[0]]], np.int32)
+        return packed, kids
+    inner = np.full(n, -1, np.int64)
+    k = 0
+    for i in range(n):
+        if count[i] == 0:
+            inner[i] = k
+            k += 1
+    packed = np.empty((k, 12), np.float32)
+    kids = np.empty((k, 4), np.int32)
+    for i in range(n):
+        if count[i] > 0:
+            continue
+        j = inner[i]
+        for c in range(2):
+            sub = i + 1 if c == 0 else np.int64(child[i])
+            packed[j, 6 * c : 6 * c + 6] = bounds[sub]
+            kids[j, c] = inner[sub] if count[sub] == 0 else child[sub]
+            kids[j, 2 + c] = count[sub]
+    return packed, kids
+
+
 def build_bvh_from_triangles(triangles: np.ndarray) -> BVH:
     """Build a BVH over triangles (T, 3, 3) float32 vertex positions."""
     tri = np.ascontiguousarray(triangles, dtype=np.float32).reshape(-1, 3, 3)
@@ -181,10 +213,18 @@ def build_bvh_from_triangles(triangles: np.ndarray) -> BVH:
         MAX_LEAF,
         TRAVERSAL_COST,
     )
+    packed, kids = _pack(bounds, child, count)
+    # One 64-byte-aligned record per node, seen both as float32 (boxes) and int32 (children).
+    n = len(kids)
+    raw = np.empty(n * 16 + 16, np.int32)
+    start = (-raw.ctypes.data % 64) // 4
+    nodes = raw[start : start + n * 16].reshape(n, 16)
+    nodes[:, 12:] = kids
+    records = nodes.view(np.float32)
+    records[:, :12] = packed
     arrays = BVHArrays(
-        bounds=bounds,
-        child=child,
-        count=count,
+        bounds=records,
+        kids=nodes,
         tri_verts=np.ascontiguousarray(tri[order].reshape(-1, 9)),
         tri_index=order,
     )

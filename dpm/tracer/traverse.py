@@ -66,31 +66,31 @@ def hit_triangle(v, i, ox, oy, oz, kx, ky, kz, sx, sy, sz, tmax):
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
-def hit_box(bounds, node, ox, oy, oz, ix, iy, iz, tmax):
-    """Entry distance of the ray into node's box if it enters before tmax, else inf.
+def hit_box(bounds, node, at, ox, oy, oz, ix, iy, iz, tmax):
+    """Entry distance into the box bounds[node, at:at+6] if entered before tmax, else inf.
 
     Written with comparisons, not min/max, so a NaN slab (ray lying in a box face) is ignored
     rather than turning into a miss.
     """
     t0, t1 = 0.0, tmax
-    near = (bounds[node, 0] - ox) * ix
-    far = (bounds[node, 3] - ox) * ix
+    near = (bounds[node, at] - ox) * ix
+    far = (bounds[node, at + 3] - ox) * ix
     if near > far:
         near, far = far, near
     if near > t0:
         t0 = near
     if far * _SLAB_SCALE < t1:
         t1 = far * _SLAB_SCALE
-    near = (bounds[node, 1] - oy) * iy
-    far = (bounds[node, 4] - oy) * iy
+    near = (bounds[node, at + 1] - oy) * iy
+    far = (bounds[node, at + 4] - oy) * iy
     if near > far:
         near, far = far, near
     if near > t0:
         t0 = near
     if far * _SLAB_SCALE < t1:
         t1 = far * _SLAB_SCALE
-    near = (bounds[node, 2] - oz) * iz
-    far = (bounds[node, 5] - oz) * iz
+    near = (bounds[node, at + 2] - oz) * iz
+    far = (bounds[node, at + 5] - oz) * iz
     if near > far:
         near, far = far, near
     if near > t0:
@@ -112,40 +112,51 @@ def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
 
     `bvh` is a BVHArrays; `stack` is scratch from `new_stack` (node index, entry distance).
     """
-    bounds, child, count, verts = bvh.bounds, bvh.child, bvh.count, bvh.tri_verts
+    bounds, kids, verts = bvh.bounds, bvh.kids, bvh.tri_verts
     kx, ky, kz, sx, sy, sz = ray_setup(dx, dy, dz)
     ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
     best_t, best = tmax, -1
-    if hit_box(bounds, 0, ox, oy, oz, ix, iy, iz, best_t) == np.inf:
-        return np.inf, -1
     node, sp = 0, 0
     while True:
-        n = count[node]
-        if n > 0:
-            first = child[node]
-            for i in range(first, first + n):
-                t = hit_triangle(verts, i, ox, oy, oz, kx, ky, kz, sx, sy, sz, best_t)
-                if t < best_t:
-                    best_t, best = t, i
-        else:
-            left, right = node + 1, child[node]
-            tl = hit_box(bounds, left, ox, oy, oz, ix, iy, iz, best_t)
-            tr = hit_box(bounds, right, ox, oy, oz, ix, iy, iz, best_t)
-            if tl < np.inf and tr < np.inf:
-                if tr < tl:
-                    left, right = right, left
-                stack[sp, 0] = right  # the farther child waits, with its entry distance
-                stack[sp, 1] = max(tl, tr)
-                sp += 1
-                node = left
-                continue
-            if tl < np.inf:
-                node = left
-                continue
-            if tr < np.inf:
-                node = right
-                continue
-        # Pop the next child that may still hold a nearer hit.
+        tl = hit_box(bounds, node, 0, ox, oy, oz, ix, iy, iz, best_t)
+        tr = hit_box(bounds, node, 6, ox, oy, oz, ix, iy, iz, best_t)
+        left, right = kids[node, 12], kids[node, 13]
+        n_left, n_right = kids[node, 14], kids[node, 15]
+        # Leaf children are intersected right away, the nearer one first.
+        if n_left > 0 and n_right > 0 and tr < tl:
+            left, right, n_left, n_right, tl, tr = right, left, n_right, n_left, tr, tl
+        # A miss is inf, and best_t may be inf too: a child counts only if finite and ≤ best_t.
+        if n_left > 0:
+            if tl < np.inf and tl <= best_t:
+                for i in range(left, left + n_left):
+                    t = hit_triangle(verts, i, ox, oy, oz, kx, ky, kz, sx, sy, sz, best_t)
+                    if t < best_t:
+                        best_t, best = t, i
+            tl = np.inf
+        if n_right > 0:
+            if tr < np.inf and tr <= best_t:
+                for i in range(right, right + n_right):
+                    t = hit_triangle(verts, i, ox, oy, oz, kx, ky, kz, sx, sy, sz, best_t)
+                    if t < best_t:
+                        best_t, best = t, i
+            tr = np.inf
+        go_left = tl < np.inf and tl <= best_t
+        go_right = tr < np.inf and tr <= best_t
+        if go_left and go_right:
+            if tr < tl:
+                left, right, tl, tr = right, left, tr, tl
+            stack[sp, 0] = right  # the farther child waits, with its entry distance
+            stack[sp, 1] = tr
+            sp += 1
+            node = left
+            continue
+        if go_left:
+            node = left
+            continue
+        if go_right:
+            node = right
+            continue
+        # Pop the next subtree that may still hold a nearer hit.
         while sp > 0 and stack[sp - 1, 1] > best_t:
             sp -= 1
         if sp == 0:
@@ -160,7 +171,7 @@ def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
 @nb.njit(cache=True, error_model="numpy")
 def any_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     """True if the ray hits any triangle at a distance in (0, tmax)."""
-    bounds, child, count, verts = bvh.bounds, bvh.child, bvh.count, bvh.tri_verts
+    bounds, kids, verts = bvh.bounds, bvh.kids, bvh.tri_verts
     kx, ky, kz, sx, sy, sz = ray_setup(dx, dy, dz)
     ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
     stack[0, 0] = 0
@@ -168,18 +179,17 @@ def any_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     while sp > 0:
         sp -= 1
         node = int(stack[sp, 0])
-        if hit_box(bounds, node, ox, oy, oz, ix, iy, iz, tmax) == np.inf:
-            continue
-        n = count[node]
-        if n > 0:
-            first = child[node]
-            for i in range(first, first + n):
+        for c in range(2):
+            if hit_box(bounds, node, 6 * c, ox, oy, oz, ix, iy, iz, tmax) == np.inf:
+                continue
+            ref, n = kids[node, 12 + c], kids[node, 14 + c]
+            if n == 0:
+                stack[sp, 0] = ref
+                sp += 1
+                continue
+            for i in range(ref, ref + n):
                 if hit_triangle(verts, i, ox, oy, oz, kx, ky, kz, sx, sy, sz, tmax) < np.inf:
                     return True
-        else:
-            stack[sp, 0] = child[node]
-            stack[sp + 1, 0] = node + 1
-            sp += 2
     return False
 
 
@@ -205,8 +215,10 @@ def any_hit_batch(bvh, depth, origins, directions, tmax, out):
     for task in nb.prange(n_tasks):
         stack = new_stack(depth)
         for r in range(task * RAYS_PER_TASK, min(n, (task + 1) * RAYS_PER_TASK)):
-            o, d = origins[r], directions[r]
-            out[r] = any_hit(bvh, o[0], o[1], o[2], d[0], d[1], d[2], tmax[r], stack)
+            out[r] = any_hit(
+                bvh, origins[r, 0], origins[r, 1], origins[r, 2],
+                directions[r, 0], directions[r, 1], directions[r, 2], tmax[r], stack,
+            )  # fmt: skip
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")

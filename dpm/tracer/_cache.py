@@ -1,0 +1,32 @@
+"""Invalidation of Numba's on-disk kernel cache, run once when `dpm.tracer` is imported."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+
+def drop_stale_kernel_cache() -> None:
+    """Delete Numba's cached kernels when any kernel source changed.
+
+    Numba re-validates a cached function against its own file only, but our kernels inline
+    functions from other files (traversal into direct lighting, say): after an edit or upgrade
+    a stale kernel with the same signature would run old code. One stamp covers them all.
+    """
+    here = Path(__file__).parent
+    sources = sorted(here.glob("*.py")) + [here.parent / "scene.py"]
+    digest = hashlib.sha256(b"".join(p.read_bytes() for p in sources)).hexdigest()
+    cache = here / "__pycache__"
+    stamp = cache / "kernels.sha256"
+    try:
+        if stamp.is_file() and stamp.read_text() == digest:
+            return
+        for f in [*cache.glob("*.nbi"), *cache.glob("*.nbc")]:
+            f.unlink()
+        cache.mkdir(exist_ok=True)
+        stamp.write_text(digest)
+    except OSError:
+        pass  # a read-only install: Numba then caches elsewhere or compiles each run
+
+
+drop_stale_kernel_cache()
