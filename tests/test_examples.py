@@ -48,3 +48,16 @@ def test_example_loads_and_renders(name: str) -> None:
     image = render(scene, RenderOptions(spp=1, width=24, height=24, progress=False)).image
     assert np.all(np.isfinite(image)) and np.all(image >= 0)
     assert image.max() > 0, "the camera sees no light at all"
+
+
+def test_committed_scenes_match_their_generator(tmp_path: Path) -> None:
+    """The committed files are exactly what examples/make_scenes.py writes (it is seeded)."""
+    import subprocess
+    import sys
+
+    script = SCENES.parent / "make_scenes.py"
+    subprocess.run(
+        [sys.executable, str(script), "--out", str(tmp_path)], check=True, capture_output=True
+    )
+    for committed in sorted(SCENES.iterdir()):
+        assert (tmp_path / committed.name).read_bytes() == committed.read_bytes(), committed.name
