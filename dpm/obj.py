@@ -8,6 +8,7 @@ offending line of a malformed file.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -66,6 +67,14 @@ def _read_lines(path: Path) -> list[str]:
         raise InputError(f"{path}: cannot read: {exc.strerror}") from None
 
 
+def _statements(path: Path) -> Iterator[tuple[int, list[str]]]:
+    """(line number, words) of each non-empty line, comments removed."""
+    for lineno, raw in enumerate(_read_lines(path), start=1):
+        words = raw.split("#", 1)[0].split()
+        if words:
+            yield lineno, words
+
+
 def _floats(path: Path, lineno: int, words: list[str], counts: tuple[int, ...]) -> list[float]:
     if len(words) - 1 not in counts:
         want = " or ".join(str(c) for c in counts)
@@ -95,11 +104,7 @@ def read_obj(path: Path) -> ObjMesh:
     name_index: dict[str, int] = {}
     mtllibs: list[Path] = []
     current = -1
-    for lineno, raw in enumerate(_read_lines(path), start=1):
-        line = raw.split("#", 1)[0].strip()
-        if not line:
-            continue
-        words = line.split()
+    for lineno, words in _statements(path):
         key = words[0]
         if key == "v":
             # A fourth (w) or extra colour values are allowed by common exporters; keep x, y, z.
@@ -151,11 +156,7 @@ def read_mtl(path: Path) -> dict[str, MtlEntry]:
     """Parse an MTL file into its materials by name, keeping only the fields dpm uses."""
     entries: dict[str, MtlEntry] = {}
     entry: MtlEntry | None = None
-    for lineno, raw in enumerate(_read_lines(path), start=1):
-        line = raw.split("#", 1)[0].strip()
-        if not line:
-            continue
-        words = line.split()
+    for lineno, words in _statements(path):
         key = words[0]
         if key == "newmtl":
             if len(words) < 2:

@@ -25,7 +25,7 @@ ROWS_PER_STEP = 8  # rows rendered between progress-bar updates
 
 @dataclass
 class RenderOptions:
-    """What to render: method and sample counts; None means the scene's or dpm's default."""
+    """What to render; width/height None keep the camera's resolution."""
 
     method: str = "direct"
     spp: int = 16

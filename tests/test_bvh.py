@@ -169,6 +169,9 @@ def test_tmax_and_occlusion() -> None:
     np.testing.assert_array_equal(idx, [0, 0, -1])
     assert t[0] == pytest.approx(2.0, rel=1e-12)
     np.testing.assert_array_equal(occluded(bvh, o, d, np.array([np.inf, 2.5, 1.5])), [1, 1, 0])
+    # A hit exactly at tmax does not count, in either query.
+    t, idx = intersect(bvh, o[:1], d[:1], 2.0)
+    assert idx[0] == -1 and not occluded(bvh, o[:1], d[:1], 2.0)[0]
     # Ray length is in units of |direction|.
     t, _ = intersect(bvh, o[:1], 2 * d[:1])
     assert t[0] == pytest.approx(1.0, rel=1e-12)

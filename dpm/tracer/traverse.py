@@ -65,39 +65,42 @@ def hit_triangle(v, i, ox, oy, oz, kx, ky, kz, sx, sy, sz, tmax):
     return tscaled / det
 
 
+@nb.njit(cache=True, inline="always")
+def _slab(lo, hi, o, inv, t0, t1):
+    """Clip the interval (t0, t1) by one axis' slab [lo, hi].
+
+    Written with comparisons, not min/max, so a NaN bound (a ray lying in a box face, where
+    0·inf appears) leaves the interval alone rather than turning into a miss.
+    """
+    near = (lo - o) * inv
+    far = (hi - o) * inv
+    if near > far:
+        near, far = far, near
+    if near > t0:
+        t0 = near
+    if far * _SLAB_SCALE < t1:
+        t1 = far * _SLAB_SCALE
+    return t0, t1
+
+
 @nb.njit(cache=True, inline="always", error_model="numpy")
 def hit_box(bounds, node, at, ox, oy, oz, ix, iy, iz, tmax):
-    """Entry distance into the box bounds[node, at:at+6] if entered before tmax, else inf.
-
-    Written with comparisons, not min/max, so a NaN slab (ray lying in a box face) is ignored
-    rather than turning into a miss.
-    """
-    t0, t1 = 0.0, tmax
-    near = (bounds[node, at] - ox) * ix
-    far = (bounds[node, at + 3] - ox) * ix
-    if near > far:
-        near, far = far, near
-    if near > t0:
-        t0 = near
-    if far * _SLAB_SCALE < t1:
-        t1 = far * _SLAB_SCALE
-    near = (bounds[node, at + 1] - oy) * iy
-    far = (bounds[node, at + 4] - oy) * iy
-    if near > far:
-        near, far = far, near
-    if near > t0:
-        t0 = near
-    if far * _SLAB_SCALE < t1:
-        t1 = far * _SLAB_SCALE
-    near = (bounds[node, at + 2] - oz) * iz
-    far = (bounds[node, at + 5] - oz) * iz
-    if near > far:
-        near, far = far, near
-    if near > t0:
-        t0 = near
-    if far * _SLAB_SCALE < t1:
-        t1 = far * _SLAB_SCALE
+    """Entry distance into the box bounds[node, at:at+6] if entered before tmax, else inf."""
+    t0, t1 = _slab(bounds[node, at], bounds[node, at + 3], ox, ix, 0.0, tmax)
+    t0, t1 = _slab(bounds[node, at + 1], bounds[node, at + 4], oy, iy, t0, t1)
+    t0, t1 = _slab(bounds[node, at + 2], bounds[node, at + 5], oz, iz, t0, t1)
     return t0 if t0 <= t1 else np.inf
+
+
+@nb.njit(cache=True, inline="always")
+def _hit_leaf(verts, first, n, ray, best_t, best):
+    """Nearest of (best_t, best) and the hits on triangles first..first+n-1 of a leaf."""
+    ox, oy, oz, kx, ky, kz, sx, sy, sz = ray
+    for i in range(first, first + n):
+        t = hit_triangle(verts, i, ox, oy, oz, kx, ky, kz, sx, sy, sz, best_t)
+        if t < best_t:
+            best_t, best = t, i
+    return best_t, best
 
 
 @nb.njit(cache=True)
@@ -114,6 +117,7 @@ def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     """
     bounds, kids, verts = bvh.bounds, bvh.kids, bvh.tri_verts
     kx, ky, kz, sx, sy, sz = ray_setup(dx, dy, dz)
+    ray = (ox, oy, oz, kx, ky, kz, sx, sy, sz)
     ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
     best_t, best = tmax, -1
     node, sp = 0, 0
@@ -128,17 +132,11 @@ def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
         # A miss is inf, and best_t may be inf too: a child counts only if finite and ≤ best_t.
         if n_left > 0:
             if tl < np.inf and tl <= best_t:
-                for i in range(left, left + n_left):
-                    t = hit_triangle(verts, i, ox, oy, oz, kx, ky, kz, sx, sy, sz, best_t)
-                    if t < best_t:
-                        best_t, best = t, i
+                best_t, best = _hit_leaf(verts, left, n_left, ray, best_t, best)
             tl = np.inf
         if n_right > 0:
             if tr < np.inf and tr <= best_t:
-                for i in range(right, right + n_right):
-                    t = hit_triangle(verts, i, ox, oy, oz, kx, ky, kz, sx, sy, sz, best_t)
-                    if t < best_t:
-                        best_t, best = t, i
+                best_t, best = _hit_leaf(verts, right, n_right, ray, best_t, best)
             tr = np.inf
         go_left = tl < np.inf and tl <= best_t
         go_right = tr < np.inf and tr <= best_t
@@ -188,7 +186,8 @@ def any_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
                 sp += 1
                 continue
             for i in range(ref, ref + n):
-                if hit_triangle(verts, i, ox, oy, oz, kx, ky, kz, sx, sy, sz, tmax) < np.inf:
+                # hit_triangle admits t == tmax; hits count only strictly before tmax.
+                if hit_triangle(verts, i, ox, oy, oz, kx, ky, kz, sx, sy, sz, tmax) < tmax:
                     return True
     return False
 
