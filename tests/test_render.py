@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -106,6 +107,9 @@ def test_cli_writes_exr_png_and_stats(scene_path: Path, capsys) -> None:
     stats = json.loads((folder / "s.json").read_text())
     assert stats["width"] == 20 and stats["spp"] == 2 and stats["triangles"] == 4
     assert set(stats["seconds"]) >= {"load", "bvh", "render", "write"}
+    umask = os.umask(0)
+    os.umask(umask)
+    assert (folder / "a.png").stat().st_mode & 0o777 == 0o666 & ~umask
     # No temporary files are left next to the outputs.
     assert sorted(p.name for p in folder.iterdir()) == [
         "a.exr", "a.png", "s.json", "scene.mtl", "scene.obj",
