@@ -15,7 +15,7 @@ from pathlib import Path
 
 from dpm.errors import InputError
 from dpm.io import write_image, write_json
-from dpm.render import COMPONENTS, IMPLEMENTED, PLANNED, RenderOptions, render, validate
+from dpm.render import COMPONENTS, IMPLEMENTED, PLANNED, RenderOptions, render
 from dpm.scene import load_scene
 
 
@@ -89,8 +89,7 @@ def render_main(argv: Sequence[str] | None = None) -> int:
             if getattr(args, key) is not None:
                 setattr(options, key, getattr(args, key))
         options.progress = not args.quiet and sys.stderr.isatty()
-        validate(options)
-        result = render(scene, options)
+        result = render(scene, options)  # validates the options first
         result.stats["seconds"]["load"] = load_seconds
         start = time.perf_counter()
         write_image(output, result.image)
