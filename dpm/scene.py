@@ -79,6 +79,7 @@ class SceneArrays(NamedTuple):
     transmittance: np.ndarray  # (M, 3) float32
     emitter_triangles: np.ndarray  # (E,) int32
     emitter_cdf: np.ndarray  # (E,) float64
+    emitter_pdf: np.ndarray  # (T,) float64 area density of light sampling (0: not an emitter)
 
 
 @dataclass(frozen=True)
@@ -117,7 +118,17 @@ class Scene:
             m.transmittance,
             e.triangles,
             e.cdf,
+            self.emitter_pdf,
         )
+
+    @property
+    def emitter_pdf(self) -> np.ndarray:
+        """(T,) float64 density per unit area (m⁻²) with which light sampling picks each point."""
+        e = self.emitters
+        pdf = np.zeros(len(self.triangles))
+        pick = np.diff(e.cdf, prepend=0.0)
+        pdf[e.triangles] = pick / self.areas[e.triangles].astype(np.float64)
+        return pdf
 
     @property
     def extent(self) -> float:
@@ -224,6 +235,18 @@ def _valid_triangles(
     return finite & (double_area > 1e-9 * longest2), cross, double_area
 
 
+def _light_reaches_geometry(tri: np.ndarray, normals: np.ndarray, emitting: np.ndarray) -> bool:
+    """Whether some vertex lies in front of some emitter (light can reach nothing otherwise)."""
+    verts = np.unique(tri.reshape(-1, 3), axis=0).astype(np.float64)
+    scale = max(float(np.abs(verts).max()), 1e-30)
+    for chunk in np.array_split(emitting, max(1, len(emitting) * len(verts) // 2**22)):
+        n = normals[chunk].astype(np.float64)  # (C, 3)
+        offset = np.einsum("ij,ij->i", n, tri[chunk, 0].astype(np.float64))
+        if np.any(verts @ n.T - offset > 1e-6 * scale):
+            return True
+    return False
+
+
 def load_scene(path: str | Path) -> Scene:
     """Load `scene.obj`, its MTL libraries and the optional `scene.toml` sidecar beside it."""
     path = Path(path)
@@ -262,6 +285,11 @@ def load_scene(path: str | Path) -> Scene:
     emitters = _emitters(tri, areas, material, materials)
     if len(emitters.triangles) == 0:
         raise InputError(f"{path}: the scene has no emitter (no material with non-zero Ke)")
+    if not _light_reaches_geometry(tri, normals, emitters.triangles):
+        raise InputError(
+            f"{path}: every light faces away from the geometry (emitters radiate from the"
+            " counter-clockwise front face only)"
+        )
     flat = tri.reshape(-1, 3).astype(np.float64)
     camera, render = _read_sidecar(path.with_suffix(".toml"), flat.min(0), flat.max(0))
     return Scene(

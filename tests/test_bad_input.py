@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import pytest
+import trimesh
 
 from conftest import FLOOR_AND_LIGHT_MTL, FLOOR_AND_LIGHT_OBJ, write_scene
 from dpm.cli import render_main, train_main
@@ -20,6 +21,18 @@ def run_render(capsys, argv: list[str]) -> tuple[int, str]:
         code = exc.code
     return code, capsys.readouterr().err
 
+
+def _closed_box_obj() -> str:
+    """The floor-and-light scene plus a closed box with outward faces around (0, 0.4, 0)."""
+    box = trimesh.creation.box(extents=(0.4, 0.4, 0.4))
+    box.apply_translation((0, 0.4, 0))
+    lines = [FLOOR_AND_LIGHT_OBJ, "usemtl floor"]
+    lines += [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in box.vertices]
+    lines += [f"f {a + 9} {b + 9} {c + 9}" for a, b, c in box.faces]
+    return "\n".join(lines) + "\n"
+
+
+CAMERA_IN_BOX = "[camera]\norigin = [0, 0.4, 0]\ntarget = [0.3, 0, 0.1]\n"
 
 CASES = {
     "missing file": (None, None, None, "file not found"),
@@ -62,6 +75,8 @@ CASES = {
     "unknown render key": (None, None, "[render]\nsamples = 4\n", "unknown key"),
     "render key type": (None, None, "[render]\nspp = 'many'\n", "'spp'"),
     "no emitter": (FLOOR_AND_LIGHT_OBJ.replace("usemtl light\n", ""), None, None, "no emitter"),
+    "lights face away": (FLOOR_AND_LIGHT_OBJ.replace("f 5 6 7 8", "f 5 8 7 6"), None, None, "away"),
+    "camera inside an object": (_closed_box_obj(), None, CAMERA_IN_BOX, "inside a closed object"),
     "empty scene": ("mtllib scene.mtl\nv 0 0 0\n", None, None, "no faces"),
     "only NaN triangles": ("v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", None, None, "no valid"),
 }
@@ -97,11 +112,13 @@ def test_bad_scene_gives_one_line_and_exit_2(case: str, tmp_path: Path, capsys) 
         (["--spp", "0"], "--spp"),
         (["--k", "0"], "--k"),
         (["--photons", "-5"], "--photons"),
+        (["--spp", "-3"], "--spp"),
         (["--seed", "-1"], "--seed"),
         (["--width", "0"], "--width"),
         (["--method", "ppm"], "not implemented yet"),
         (["--method", "nonsense"], "invalid choice"),
         (["--component", "caustic"], "caustic"),
+        (["--method", "pt-nocaustic", "--component", "caustic"], "caustic"),
         (["--spp", "many"], "invalid int"),
     ],
 )

@@ -146,13 +146,16 @@ v 1 0 1
 v nan 0 0
 v inf 0 0
 v 2 0 -1
+v -1 1 -1
+v 1 1 1
+v 1 1 -1
 usemtl floor
 f 1 3 2
 f 1 2 6
 f 1 4 2
 f 1 5 2
 usemtl light
-f 3 2 1
+f 7 9 8
 """
     with pytest.warns(UserWarning, match="dropped 3 degenerate"):
         scene = load_scene(write_scene(tmp_path, obj))

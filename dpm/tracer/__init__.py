@@ -7,9 +7,24 @@ import numpy as np
 from dpm.scene import Scene
 from dpm.tracer import _cache  # noqa: F401  (first: drops stale compiled kernels)
 from dpm.tracer.bvh import BVH, BVHArrays, build_bvh_from_triangles
+from dpm.tracer.path import shade
+from dpm.tracer.photons import PhotonMap, trace_photons
 from dpm.tracer.traverse import any_hit_batch, brute_force_batch, closest_hit_batch
+from dpm.tracer.visible import VisiblePoints, trace_visible_points
 
-__all__ = ["BVH", "BVHArrays", "build_bvh", "intersect", "intersect_brute_force", "occluded"]
+__all__ = [
+    "BVH",
+    "BVHArrays",
+    "PhotonMap",
+    "VisiblePoints",
+    "build_bvh",
+    "intersect",
+    "intersect_brute_force",
+    "occluded",
+    "shade",
+    "trace_photons",
+    "trace_visible_points",
+]
 
 
 def build_bvh(scene: Scene | np.ndarray) -> BVH:

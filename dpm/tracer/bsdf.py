@@ -6,6 +6,8 @@ import math
 
 import numba as nb
 
+from dpm.scene import MIRROR
+
 
 @nb.njit(cache=True, inline="always")
 def reflect(dx, dy, dz, nx, ny, nz):
@@ -34,3 +36,26 @@ def refract(dx, dy, dz, nx, ny, nz, cos_i, cos_t, eta):
     """Transmitted direction of incoming d through normal n facing the incoming side."""
     k = cos_i / eta - cos_t
     return dx / eta + k * nx, dy / eta + k * ny, dz / eta + k * nz
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def scatter_specular(sc, m, dx, dy, dz, nx, ny, nz, cos_i, front, u, radiance):
+    """Scatter direction d off specular material m: (new d, RGB weight, side).
+
+    n faces the incoming side and cos_i = -d·n > 0; `front` says the ray arrived from the
+    outside of a dielectric. A dielectric reflects with probability F (Fresnel), so the weight
+    is Tf for refraction and 1 for reflection, times (η₁/η₂)² on radiance paths only. side is
+    +1 when the new ray leaves on the incoming side (offset along n), -1 when it crosses.
+    """
+    if sc.kind[m] == MIRROR:
+        rx, ry, rz = reflect(dx, dy, dz, nx, ny, nz)
+        return rx, ry, rz, sc.specular[m, 0], sc.specular[m, 1], sc.specular[m, 2], 1.0
+    eta = sc.ior[m] if front else 1.0 / sc.ior[m]
+    f, cos_t = fresnel_dielectric(cos_i, eta)
+    if u < f:
+        rx, ry, rz = reflect(dx, dy, dz, nx, ny, nz)
+        return rx, ry, rz, 1.0, 1.0, 1.0, 1.0
+    tx, ty, tz = refract(dx, dy, dz, nx, ny, nz, cos_i, cos_t, eta)
+    scale = 1.0 / (eta * eta) if radiance else 1.0  # radiance / η² is conserved
+    tf = sc.transmittance[m]
+    return tx, ty, tz, tf[0] * scale, tf[1] * scale, tf[2] * scale, -1.0

@@ -51,3 +51,23 @@ def sample_triangle(tri, u1, u2):
     y = b0 * tri[0, 1] + b1 * tri[1, 1] + b2 * tri[2, 1]
     z = b0 * tri[0, 2] + b1 * tri[1, 2] + b2 * tri[2, 2]
     return x, y, z
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def sample_cosine(nx, ny, nz, u1, u2):
+    """A unit direction about unit normal n with density cosθ/π (solid angle)."""
+    # Orthonormal basis without branches on the normal's sign (Duff et al. 2017).
+    sign = 1.0 if nz >= 0 else -1.0
+    a = -1.0 / (sign + nz)
+    b = nx * ny * a
+    tx, ty, tz = 1.0 + sign * nx * nx * a, sign * b, -sign * nx
+    bx, by, bz = b, sign + ny * ny * a, -ny
+    r = math.sqrt(u1)
+    phi = 2.0 * math.pi * u2
+    x, y = r * math.cos(phi), r * math.sin(phi)
+    z = math.sqrt(max(0.0, 1.0 - u1))
+    return (
+        x * tx + y * bx + z * nx,
+        x * ty + y * by + z * ny,
+        x * tz + y * bz + z * nz,
+    )

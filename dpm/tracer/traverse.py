@@ -10,8 +10,11 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from dpm.scene import Scene
+
 # pbrt's robust-slab factor 1 + 2·γ(3) for float64, so box tests never cull a true hit.
 _SLAB_SCALE = 1.0 + 2.0 * (3 * 2.0**-53) / (1 - 3 * 2.0**-53)
+SPAWN_OFFSET = 1e-6  # new rays start this fraction of the scene diagonal off their surface
 RAYS_PER_TASK = 256  # rays each parallel task traces with one traversal stack
 
 
@@ -232,3 +235,11 @@ def brute_force_batch(verts, origins, directions, tmax, out_t, out_tri):
             if t < best_t:
                 best_t, best = t, i
         out_t[r], out_tri[r] = (best_t, best) if best >= 0 else (np.inf, -1)
+
+
+def spawn_offset(scene: Scene) -> float:
+    """Distance (scene units) new rays start off the surface they leave, against self-hits.
+
+    Hit points are float64 on float32 triangles, so their error is far below this offset.
+    """
+    return SPAWN_OFFSET * max(scene.extent, 1e-30)

@@ -1,0 +1,151 @@
+"""Photon tracing: paths from the lights, stored at every diffuse hit.
+
+Photon path j is random stream j: dimensions 0–4 choose the light, the point and the
+direction; bounce b uses dimensions 5 + 3b … 7 + 3b. Paths are traced in chunks, each path
+into its own fixed slots, and compacted in path order, so the map does not depend on the
+thread count.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+from tqdm import tqdm
+
+from dpm.scene import DIFFUSE, Scene
+from dpm.tracer.bsdf import scatter_specular
+from dpm.tracer.bvh import BVH
+from dpm.tracer.lights import sample_light_point
+from dpm.tracer.sampling import sample_cosine, uniform
+from dpm.tracer.traverse import closest_hit, new_stack, spawn_offset
+
+MAX_BOUNCES = 16  # scattering events a photon path may have; Russian roulette ends most sooner
+PATHS_PER_CHUNK = 1 << 16
+
+
+@dataclass(frozen=True)
+class PhotonMap:
+    """Photons stored at diffuse hits (struct of arrays), from `n_paths` emitted paths."""
+
+    position: np.ndarray  # (P, 3) float32 world position
+    direction: np.ndarray  # (P, 3) float32 unit direction towards where the photon came from
+    flux: np.ndarray  # (P, 3) float32 RGB flux (W), already divided by n_paths
+    normal: np.ndarray  # (P, 3) float32 unit geometric normal on the side the photon arrived
+    caustic: np.ndarray  # (P,) bool: the path was L S+ D (specular bounces, no diffuse one)
+    bounces: np.ndarray  # (P,) uint8 scattering events before this hit (0: straight from a light)
+    path: np.ndarray  # (P,) int64 index of the emitted path that stored it
+    n_paths: int  # emitted photon paths N
+
+    def __len__(self) -> int:
+        return len(self.caustic)
+
+    def select(self, mask: np.ndarray) -> PhotonMap:
+        """The photons where mask (P,) bool is set, from the same n_paths."""
+        return PhotonMap(
+            self.position[mask], self.direction[mask], self.flux[mask], self.normal[mask],
+            self.caustic[mask], self.bounces[mask], self.path[mask], self.n_paths,
+        )  # fmt: skip
+
+
+@nb.njit(cache=True, parallel=True, error_model="numpy")
+def photon_kernel(
+    bvh, depth, sc, path0, n_paths, total, seed, eps, caustic_only,
+    position, direction, flux, normal, caustic, bounces, count,
+):  # fmt: skip
+    """Trace paths path0..path0+n_paths-1; path j fills slots [j, :count[j]] of the outputs.
+
+    `total` is the number of paths of the whole map, which divides every photon's flux.
+    """
+    for j in nb.prange(n_paths):
+        stack = new_stack(depth)
+        stream = path0 + j
+        count[j] = 0
+        lt, ox, oy, oz, area_pdf = sample_light_point(
+            sc, uniform(seed, stream, 0), uniform(seed, stream, 1), uniform(seed, stream, 2)
+        )
+        nx, ny, nz = sc.normals[lt, 0], sc.normals[lt, 1], sc.normals[lt, 2]
+        dx, dy, dz = sample_cosine(nx, ny, nz, uniform(seed, stream, 3), uniform(seed, stream, 4))
+        # Flux Le·cos/(pdf_area·pdf_dir) = Le·π/pdf_area, per emitted path.
+        e = sc.emission[sc.material[lt]]
+        scale = np.pi / (area_pdf * total)
+        fr, fg, fb = e[0] * scale, e[1] * scale, e[2] * scale
+        ox, oy, oz = ox + eps * nx, oy + eps * ny, oz + eps * nz
+        specular = diffuse = False
+        for b in range(MAX_BOUNCES + 1):
+            t, tri = closest_hit(bvh, ox, oy, oz, dx, dy, dz, np.inf, stack)
+            if tri < 0:
+                break
+            px, py, pz = ox + t * dx, oy + t * dy, oz + t * dz
+            nx, ny, nz = sc.normals[tri, 0], sc.normals[tri, 1], sc.normals[tri, 2]
+            m = sc.material[tri]
+            cos_d = dx * nx + dy * ny + dz * nz
+            front = cos_d < 0
+            if not front:
+                nx, ny, nz, cos_d = -nx, -ny, -nz, -cos_d
+            dim = 5 + 3 * b
+            if sc.kind[m] == DIFFUSE:
+                is_caustic = specular and not diffuse
+                if is_caustic or not caustic_only:
+                    k = count[j]
+                    position[j, k, 0], position[j, k, 1], position[j, k, 2] = px, py, pz
+                    direction[j, k, 0], direction[j, k, 1], direction[j, k, 2] = -dx, -dy, -dz
+                    flux[j, k, 0], flux[j, k, 1], flux[j, k, 2] = fr, fg, fb
+                    normal[j, k, 0], normal[j, k, 1], normal[j, k, 2] = nx, ny, nz
+                    caustic[j, k] = is_caustic
+                    bounces[j, k] = b
+                    count[j] = k + 1
+                if caustic_only:
+                    break  # no later photon of this path can be a caustic one
+                # Russian roulette by the albedo keeps the flux of surviving photons unchanged.
+                a = sc.albedo[m]
+                q = max(a[0], a[1], a[2])
+                if b == MAX_BOUNCES or uniform(seed, stream, dim) >= q:
+                    break
+                fr, fg, fb = fr * a[0] / q, fg * a[1] / q, fb * a[2] / q
+                dx, dy, dz = sample_cosine(
+                    nx, ny, nz, uniform(seed, stream, dim + 1), uniform(seed, stream, dim + 2)
+                )
+                ox, oy, oz = px + eps * nx, py + eps * ny, pz + eps * nz
+                diffuse = True
+            else:
+                if b == MAX_BOUNCES:
+                    break
+                dx, dy, dz, wr, wg, wb, side = scatter_specular(
+                    sc, m, dx, dy, dz, nx, ny, nz, -cos_d, front, uniform(seed, stream, dim), False
+                )
+                fr, fg, fb = fr * wr, fg * wg, fb * wb
+                ox, oy, oz = px + side * eps * nx, py + side * eps * ny, pz + side * eps * nz
+                specular = True
+
+
+def trace_photons(
+    scene: Scene,
+    bvh: BVH,
+    n_paths: int,
+    seed: int = 0,
+    caustic_only: bool = False,
+    progress: bool = False,
+) -> PhotonMap:
+    """Emit n_paths photon paths from the scene's lights and store their diffuse hits."""
+    sc, eps = scene.kernel_arrays(), spawn_offset(scene)
+    parts: list[tuple[np.ndarray, ...]] = []
+    slots = 1 if caustic_only else MAX_BOUNCES + 1
+    with tqdm(total=n_paths, unit="path", disable=not progress, desc="photons") as bar:
+        for path0 in range(0, max(n_paths, 1), PATHS_PER_CHUNK):  # one empty chunk for 0
+            n = min(PATHS_PER_CHUNK, n_paths - path0)
+            pos, dirs, flux, nrm = (np.zeros((n, slots, 3), np.float32) for _ in range(4))
+            caustic = np.zeros((n, slots), np.bool_)
+            bounces = np.zeros((n, slots), np.uint8)
+            count = np.zeros(n, np.int32)
+            photon_kernel(
+                bvh.arrays, bvh.depth, sc, path0, n, n_paths, seed, eps, caustic_only,
+                pos, dirs, flux, nrm, caustic, bounces, count,
+            )  # fmt: skip
+            used = np.arange(slots)[None, :] < count[:, None]  # (n, slots), path-major order
+            path = np.broadcast_to(np.arange(path0, path0 + n)[:, None], used.shape)
+            parts.append(tuple(a[used] for a in (pos, dirs, flux, nrm, caustic, bounces, path)))
+            bar.update(n)
+    cols = [np.concatenate(c) for c in zip(*parts, strict=True)]
+    return PhotonMap(*cols[:6], cols[6].astype(np.int64), n_paths)

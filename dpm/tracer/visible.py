@@ -1,0 +1,124 @@
+"""Visible points: camera rays followed through specular chains to the first diffuse surface.
+
+Sample s of pixel (x, y) is random stream (y·W + x)·spp + s: dimensions 0–1 jitter it inside
+the pixel and dimension 2 + i decides the Fresnel event at specular vertex i. Every method
+starts from these same points, so the same seed gives the same visible points whatever the
+method; path tracing from them uses dimensions from SHADE_DIM0 on.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+from dpm.camera import Camera
+from dpm.scene import DIFFUSE, Scene
+from dpm.tracer.bsdf import scatter_specular
+from dpm.tracer.bvh import BVH
+from dpm.tracer.sampling import uniform
+from dpm.tracer.traverse import closest_hit, new_stack, spawn_offset
+
+MAX_SPECULAR_DEPTH = 16  # specular vertices a camera path may pass before it is dropped
+SHADE_DIM0 = 2 + MAX_SPECULAR_DEPTH
+
+
+@dataclass(frozen=True)
+class VisiblePoints:
+    """First diffuse hits of camera samples (struct of arrays, one row per pixel sample).
+
+    Rows with hit False escaped, were absorbed or exceeded the specular depth; their other
+    fields are zero except `emitted`.
+    """
+
+    position: np.ndarray  # (N, 3) float32 world position
+    normal: np.ndarray  # (N, 3) float32 unit geometric normal on the side the camera sees
+    albedo: np.ndarray  # (N, 3) float32 Lambertian reflectance Kd
+    throughput: np.ndarray  # (N, 3) float32 camera-path weight (Ks, Tf, (η₁/η₂)² products)
+    emitted: np.ndarray  # (N, 3) float32 radiance of lights seen along the specular chain
+    hit: np.ndarray  # (N,) bool: found a diffuse surface
+    pixel: np.ndarray  # (N,) int32 row-major pixel index y·W + x
+    sample: np.ndarray  # (N,) int64 random stream of the sample, (y·W + x)·spp + s
+
+    def __len__(self) -> int:
+        return len(self.hit)
+
+
+@nb.njit(cache=True, parallel=True, error_model="numpy")
+def visible_points_kernel(
+    bvh, depth, sc, cam, width, height, row0, row1, spp, seed, eps,
+    position, normal, albedo, throughput, emitted, hit, pixel, sample,
+):  # fmt: skip
+    """Fill the output arrays (one row per sample of image rows row0..row1-1)."""
+    for p in nb.prange((row1 - row0) * width):
+        stack = new_stack(depth)
+        pix = row0 * width + p
+        y, x = pix // width, pix % width
+        for s in range(spp):
+            i = p * spp + s
+            stream = pix * spp + s
+            pixel[i], sample[i] = pix, stream
+            fx = 2.0 * (x + uniform(seed, stream, 0)) / width - 1.0
+            fy = 1.0 - 2.0 * (y + uniform(seed, stream, 1)) / height
+            dx = cam[1, 0] + fx * cam[2, 0] + fy * cam[3, 0]
+            dy = cam[1, 1] + fx * cam[2, 1] + fy * cam[3, 1]
+            dz = cam[1, 2] + fx * cam[2, 2] + fy * cam[3, 2]
+            inv_len = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
+            dx, dy, dz = dx * inv_len, dy * inv_len, dz * inv_len
+            ox, oy, oz = cam[0, 0], cam[0, 1], cam[0, 2]
+            tr = tg = tb = 1.0
+            er = eg = eb = 0.0
+            hit[i] = False
+            for vertex in range(MAX_SPECULAR_DEPTH + 1):
+                t, tri = closest_hit(bvh, ox, oy, oz, dx, dy, dz, np.inf, stack)
+                if tri < 0:
+                    break
+                px, py, pz = ox + t * dx, oy + t * dy, oz + t * dz
+                nx, ny, nz = sc.normals[tri, 0], sc.normals[tri, 1], sc.normals[tri, 2]
+                m = sc.material[tri]
+                cos_d = dx * nx + dy * ny + dz * nz
+                front = cos_d < 0  # the front side of a dielectric is outside (air)
+                if front:  # emitters radiate from the front face only
+                    er += tr * sc.emission[m, 0]
+                    eg += tg * sc.emission[m, 1]
+                    eb += tb * sc.emission[m, 2]
+                else:  # face the normal towards the incoming ray
+                    nx, ny, nz, cos_d = -nx, -ny, -nz, -cos_d
+                if sc.kind[m] == DIFFUSE:
+                    position[i, 0], position[i, 1], position[i, 2] = px, py, pz
+                    normal[i, 0], normal[i, 1], normal[i, 2] = nx, ny, nz
+                    albedo[i, 0], albedo[i, 1], albedo[i, 2] = sc.albedo[m]
+                    throughput[i, 0], throughput[i, 1], throughput[i, 2] = tr, tg, tb
+                    hit[i] = True
+                    break
+                if vertex == MAX_SPECULAR_DEPTH:
+                    break
+                u = uniform(seed, stream, 2 + vertex)
+                dx, dy, dz, wr, wg, wb, side = scatter_specular(
+                    sc, m, dx, dy, dz, nx, ny, nz, -cos_d, front, u, True
+                )
+                tr, tg, tb = tr * wr, tg * wg, tb * wb
+                ox, oy, oz = px + side * eps * nx, py + side * eps * ny, pz + side * eps * nz
+            if not hit[i]:
+                position[i] = 0.0
+                normal[i] = 0.0
+                albedo[i] = 0.0
+                throughput[i] = 0.0
+            emitted[i, 0], emitted[i, 1], emitted[i, 2] = er, eg, eb
+
+
+def trace_visible_points(
+    scene: Scene, bvh: BVH, camera: Camera, spp: int, seed: int, rows: tuple[int, int]
+) -> VisiblePoints:
+    """Visible points of spp samples per pixel for image rows rows[0]..rows[1]-1."""
+    row0, row1 = rows
+    n = (row1 - row0) * camera.width * spp
+    vec = [np.zeros((n, 3), np.float32) for _ in range(5)]
+    hit, pixel, sample = np.zeros(n, np.bool_), np.zeros(n, np.int32), np.zeros(n, np.int64)
+    visible_points_kernel(
+        bvh.arrays, bvh.depth, scene.kernel_arrays(), camera.basis(), camera.width,
+        camera.height, row0, row1, spp, seed, spawn_offset(scene), *vec, hit, pixel, sample,
+    )  # fmt: skip
+    return VisiblePoints(*vec, hit, pixel, sample)
