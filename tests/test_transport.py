@@ -102,7 +102,7 @@ def furnace(folder: Path, albedo: float, radiance: float) -> Path:
 @pytest.mark.parametrize("albedo", [0.0, 0.5, 0.9])
 def test_furnace_radiance_is_le_over_one_minus_albedo(tmp_path: Path, albedo: float) -> None:
     scene = load_scene(furnace(tmp_path, albedo, radiance=0.75))
-    result = render(scene, RenderOptions(spp=64, progress=False))
+    result = render(scene, RenderOptions(spp=256, progress=False))
     expected = 0.75 / (1 - albedo)
     assert result.image.mean() == pytest.approx(expected, rel=0.01)
     # Every pixel, not only the mean; longer paths (higher albedo) are noisier.

@@ -19,9 +19,9 @@ from dpm.tracer.bvh import BVH
 from dpm.tracer.lights import light_pdf_solid_angle, sample_light_point
 from dpm.tracer.sampling import sample_cosine, uniform
 from dpm.tracer.traverse import any_hit, closest_hit, new_stack, spawn_offset
-from dpm.tracer.visible import SHADE_DIM0, VisiblePoints
+from dpm.tracer.visible import RR_SPECULAR, RR_SURVIVAL, SHADE_DIM0, VisiblePoints
 
-MAX_VERTICES = 64  # path vertices after the visible point; Russian roulette ends most sooner
+MAX_VERTICES = 256  # path vertices after the visible point; Russian roulette ends most sooner
 RR_START = 3  # vertices before Russian roulette may end a path
 DIMS_PER_VERTEX = 8  # Fresnel, light pick, light point (2), direction (2), roulette, spare
 SAMPLES_PER_TASK = 64
@@ -83,7 +83,7 @@ def shade_one(bvh, sc, seed, stream, eps, caustics, stack, px, py, pz, nx, ny, n
                 lb += bb * e[2] * g
         # Continue by cosine sampling: BSDF·cos/pdf is the albedo, already in b.
         if vertex >= RR_START:
-            q = min(max(br, bg, bb), 0.95)
+            q = min(max(br, bg, bb), RR_SURVIVAL)
             if uniform(seed, stream, dim + 6) >= q:
                 break
             br, bg, bb = br / q, bg / q, bb / q
@@ -121,7 +121,13 @@ def shade_one(bvh, sc, seed, stream, eps, caustics, stack, px, py, pz, nx, ny, n
                 br, bg, bb = br * sc.albedo[m, 0], bg * sc.albedo[m, 1], bb * sc.albedo[m, 2]
                 found = True
                 break
-            u = uniform(seed, stream, SHADE_DIM0 + DIMS_PER_VERTEX * vertex)
+            dim = SHADE_DIM0 + DIMS_PER_VERTEX * vertex
+            if vertex >= RR_SPECULAR:  # long specular chains too: TIR can trap a path in glass
+                q = min(max(br, bg, bb), RR_SURVIVAL)
+                if uniform(seed, stream, dim + 6) >= q:
+                    break
+                br, bg, bb = br / q, bg / q, bb / q
+            u = uniform(seed, stream, dim)
             dx, dy, dz, wr, wg, wb, side = scatter_specular(
                 sc, m, dx, dy, dz, nx, ny, nz, -cos_d, front, u, True
             )

@@ -1,7 +1,8 @@
 """Photon tracing: paths from the lights, stored at every diffuse hit.
 
 Photon path j is random stream j: dimensions 0–4 choose the light, the point and the
-direction; bounce b uses dimensions 5 + 3b … 7 + 3b. Paths are traced in chunks, each path
+direction; bounce b uses dimensions 5 + 3b … 7 + 3b (Fresnel or roulette, then a direction or
+roulette on long specular chains). Paths are traced in chunks, each path
 into its own fixed slots, and compacted in path order, so the map does not depend on the
 thread count.
 """
@@ -20,9 +21,11 @@ from dpm.tracer.bvh import BVH
 from dpm.tracer.lights import sample_light_point
 from dpm.tracer.sampling import sample_cosine, uniform
 from dpm.tracer.traverse import closest_hit, new_stack, spawn_offset
+from dpm.tracer.visible import RR_SPECULAR, RR_SURVIVAL
 
-MAX_BOUNCES = 16  # scattering events a photon path may have; Russian roulette ends most sooner
-PATHS_PER_CHUNK = 1 << 16
+MAX_BOUNCES = 256  # scattering events a photon path may have; Russian roulette ends most sooner
+MAX_STORED = 32  # photons one path may store (its diffuse hits); the path ends there
+PATHS_PER_CHUNK = 1 << 14
 
 
 @dataclass(frozen=True)
@@ -34,7 +37,7 @@ class PhotonMap:
     flux: np.ndarray  # (P, 3) float32 RGB flux (W), already divided by n_paths
     normal: np.ndarray  # (P, 3) float32 unit geometric normal on the side the photon arrived
     caustic: np.ndarray  # (P,) bool: the path was L S+ D (specular bounces, no diffuse one)
-    bounces: np.ndarray  # (P,) uint8 scattering events before this hit (0: straight from a light)
+    bounces: np.ndarray  # (P,) uint16 scattering events before this hit (0: straight from a light)
     path: np.ndarray  # (P,) int64 index of the emitted path that stored it
     n_paths: int  # emitted photon paths N
 
@@ -96,8 +99,8 @@ def photon_kernel(
                     caustic[j, k] = is_caustic
                     bounces[j, k] = b
                     count[j] = k + 1
-                if caustic_only:
-                    break  # no later photon of this path can be a caustic one
+                if caustic_only or count[j] == MAX_STORED:
+                    break  # caustic_only: no later photon of this path can be a caustic one
                 # Russian roulette by the albedo keeps the flux of surviving photons unchanged.
                 a = sc.albedo[m]
                 q = max(a[0], a[1], a[2])
@@ -112,6 +115,10 @@ def photon_kernel(
             else:
                 if b == MAX_BOUNCES:
                     break
+                if b >= RR_SPECULAR:  # total internal reflection can trap a photon in glass
+                    if uniform(seed, stream, dim + 1) >= RR_SURVIVAL:
+                        break
+                    fr, fg, fb = fr / RR_SURVIVAL, fg / RR_SURVIVAL, fb / RR_SURVIVAL
                 dx, dy, dz, wr, wg, wb, side = scatter_specular(
                     sc, m, dx, dy, dz, nx, ny, nz, -cos_d, front, uniform(seed, stream, dim), False
                 )
@@ -131,13 +138,13 @@ def trace_photons(
     """Emit n_paths photon paths from the scene's lights and store their diffuse hits."""
     sc, eps = scene.kernel_arrays(), spawn_offset(scene)
     parts: list[tuple[np.ndarray, ...]] = []
-    slots = 1 if caustic_only else MAX_BOUNCES + 1
+    slots = 1 if caustic_only else MAX_STORED
     with tqdm(total=n_paths, unit="path", disable=not progress, desc="photons") as bar:
         for path0 in range(0, max(n_paths, 1), PATHS_PER_CHUNK):  # one empty chunk for 0
             n = min(PATHS_PER_CHUNK, n_paths - path0)
             pos, dirs, flux, nrm = (np.zeros((n, slots, 3), np.float32) for _ in range(4))
             caustic = np.zeros((n, slots), np.bool_)
-            bounces = np.zeros((n, slots), np.uint8)
+            bounces = np.zeros((n, slots), np.uint16)
             count = np.zeros(n, np.int32)
             photon_kernel(
                 bvh.arrays, bvh.depth, sc, path0, n, n_paths, seed, eps, caustic_only,

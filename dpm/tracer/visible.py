@@ -1,7 +1,9 @@
 """Visible points: camera rays followed through specular chains to the first diffuse surface.
 
 Sample s of pixel (x, y) is random stream (y·W + x)·spp + s: dimensions 0–1 jitter it inside
-the pixel and dimension 2 + i decides the Fresnel event at specular vertex i. Every method
+the pixel, dimension 2 + 2i decides the Fresnel event at specular vertex i and 3 + 2i Russian
+roulette there (from vertex RR_SPECULAR on: total internal reflection can trap a path in
+glass for hundreds of bounces, and cutting it off would darken the glass). Every method
 starts from these same points, so the same seed gives the same visible points whatever the
 method; path tracing from them uses dimensions from SHADE_DIM0 on.
 """
@@ -21,8 +23,10 @@ from dpm.tracer.bvh import BVH
 from dpm.tracer.sampling import uniform
 from dpm.tracer.traverse import closest_hit, new_stack, spawn_offset
 
-MAX_SPECULAR_DEPTH = 16  # specular vertices a camera path may pass before it is dropped
-SHADE_DIM0 = 2 + MAX_SPECULAR_DEPTH
+MAX_SPECULAR_DEPTH = 256  # specular vertices a camera path may pass before it is dropped
+RR_SPECULAR = 16  # specular vertices before Russian roulette may end a path (also for photons)
+RR_SURVIVAL = 0.95  # the most likely survival of Russian roulette: trapped paths end too
+SHADE_DIM0 = 2 + 2 * MAX_SPECULAR_DEPTH
 
 
 @dataclass(frozen=True)
@@ -95,7 +99,12 @@ def visible_points_kernel(
                     break
                 if vertex == MAX_SPECULAR_DEPTH:
                     break
-                u = uniform(seed, stream, 2 + vertex)
+                if vertex >= RR_SPECULAR:
+                    q = min(max(tr, tg, tb), RR_SURVIVAL)
+                    if uniform(seed, stream, 3 + 2 * vertex) >= q:
+                        break
+                    tr, tg, tb = tr / q, tg / q, tb / q
+                u = uniform(seed, stream, 2 + 2 * vertex)
                 dx, dy, dz, wr, wg, wb, side = scatter_specular(
                     sc, m, dx, dy, dz, nx, ny, nz, -cos_d, front, u, True
                 )
