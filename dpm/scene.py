@@ -11,6 +11,7 @@ import math
 import tomllib
 import warnings
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import NamedTuple
 
@@ -96,7 +97,7 @@ class Scene:
     camera: Camera
     render_defaults: dict[str, object] = field(default_factory=dict)
 
-    @property
+    @cached_property
     def bounds(self) -> np.ndarray:
         """(2, 3) float64 axis-aligned bounding box: minimum and maximum corner."""
         flat = self.triangles.reshape(-1, 3)
@@ -121,7 +122,7 @@ class Scene:
             self.emitter_pdf,
         )
 
-    @property
+    @cached_property
     def emitter_pdf(self) -> np.ndarray:
         """(T,) float64 density per unit area (m⁻²) with which light sampling picks each point."""
         e = self.emitters

@@ -18,7 +18,8 @@ from dpm.tracer.bsdf import scatter_specular
 from dpm.tracer.bvh import BVH
 from dpm.tracer.lights import light_pdf_solid_angle, sample_light_point
 from dpm.tracer.sampling import sample_cosine, uniform
-from dpm.tracer.traverse import any_hit, closest_hit, new_stack, spawn_offset
+from dpm.tracer.surface import next_surface
+from dpm.tracer.traverse import any_hit, new_stack, spawn_offset
 from dpm.tracer.visible import RR_SPECULAR, RR_SURVIVAL, SHADE_DIM0, VisiblePoints
 
 MAX_VERTICES = 256  # path vertices after the visible point; Russian roulette ends most sooner
@@ -96,17 +97,14 @@ def shade_one(bvh, sc, seed, stream, eps, caustics, stack, px, py, pz, nx, ny, n
         found = False
         while vertex < MAX_VERTICES:
             vertex += 1
-            t, tri = closest_hit(bvh, ox, oy, oz, dx, dy, dz, np.inf, stack)
+            tri, t, px, py, pz, nx, ny, nz, m, cos_i, front = next_surface(
+                bvh, sc, ox, oy, oz, dx, dy, dz, stack
+            )
             if tri < 0:
                 break
-            px, py, pz = ox + t * dx, oy + t * dy, oz + t * dz
-            nx, ny, nz = sc.normals[tri, 0], sc.normals[tri, 1], sc.normals[tri, 2]
-            m = sc.material[tri]
-            cos_d = dx * nx + dy * ny + dz * nz
-            front = cos_d < 0
             if front and sc.emitter_pdf[tri] > 0:
                 if specular == 0:  # light sampling could have found it: MIS
-                    w = _power2(pdf_b, light_pdf_solid_angle(sc, tri, t, -cos_d))
+                    w = _power2(pdf_b, light_pdf_solid_angle(sc, tri, t, cos_i))
                 elif caustics or vertex > specular + 1:
                     w = 1.0  # only BSDF sampling reaches lights through specular chains
                 else:
@@ -115,8 +113,6 @@ def shade_one(bvh, sc, seed, stream, eps, caustics, stack, px, py, pz, nx, ny, n
                 lr += br * e[0] * w
                 lg += bg * e[1] * w
                 lb += bb * e[2] * w
-            if not front:
-                nx, ny, nz, cos_d = -nx, -ny, -nz, -cos_d
             if sc.kind[m] == DIFFUSE:
                 br, bg, bb = br * sc.albedo[m, 0], bg * sc.albedo[m, 1], bb * sc.albedo[m, 2]
                 found = True
@@ -129,7 +125,7 @@ def shade_one(bvh, sc, seed, stream, eps, caustics, stack, px, py, pz, nx, ny, n
                 br, bg, bb = br / q, bg / q, bb / q
             u = uniform(seed, stream, dim)
             dx, dy, dz, wr, wg, wb, side = scatter_specular(
-                sc, m, dx, dy, dz, nx, ny, nz, -cos_d, front, u, True
+                sc, m, dx, dy, dz, nx, ny, nz, cos_i, front, u, True
             )
             br, bg, bb = br * wr, bg * wg, bb * wb
             ox, oy, oz = px + side * eps * nx, py + side * eps * ny, pz + side * eps * nz

@@ -20,7 +20,8 @@ from dpm.tracer.bsdf import scatter_specular
 from dpm.tracer.bvh import BVH
 from dpm.tracer.lights import sample_light_point
 from dpm.tracer.sampling import sample_cosine, uniform
-from dpm.tracer.traverse import closest_hit, new_stack, spawn_offset
+from dpm.tracer.surface import next_surface
+from dpm.tracer.traverse import new_stack, spawn_offset
 from dpm.tracer.visible import RR_SPECULAR, RR_SURVIVAL
 
 MAX_BOUNCES = 256  # scattering events a photon path may have; Russian roulette ends most sooner
@@ -77,16 +78,11 @@ def photon_kernel(
         ox, oy, oz = ox + eps * nx, oy + eps * ny, oz + eps * nz
         specular = diffuse = False
         for b in range(MAX_BOUNCES + 1):
-            t, tri = closest_hit(bvh, ox, oy, oz, dx, dy, dz, np.inf, stack)
+            tri, t, px, py, pz, nx, ny, nz, m, cos_i, front = next_surface(
+                bvh, sc, ox, oy, oz, dx, dy, dz, stack
+            )
             if tri < 0:
                 break
-            px, py, pz = ox + t * dx, oy + t * dy, oz + t * dz
-            nx, ny, nz = sc.normals[tri, 0], sc.normals[tri, 1], sc.normals[tri, 2]
-            m = sc.material[tri]
-            cos_d = dx * nx + dy * ny + dz * nz
-            front = cos_d < 0
-            if not front:
-                nx, ny, nz, cos_d = -nx, -ny, -nz, -cos_d
             dim = 5 + 3 * b
             if sc.kind[m] == DIFFUSE:
                 is_caustic = specular and not diffuse
@@ -120,7 +116,7 @@ def photon_kernel(
                         break
                     fr, fg, fb = fr / RR_SURVIVAL, fg / RR_SURVIVAL, fb / RR_SURVIVAL
                 dx, dy, dz, wr, wg, wb, side = scatter_specular(
-                    sc, m, dx, dy, dz, nx, ny, nz, -cos_d, front, uniform(seed, stream, dim), False
+                    sc, m, dx, dy, dz, nx, ny, nz, cos_i, front, uniform(seed, stream, dim), False
                 )
                 fr, fg, fb = fr * wr, fg * wg, fb * wb
                 ox, oy, oz = px + side * eps * nx, py + side * eps * ny, pz + side * eps * nz

@@ -21,7 +21,8 @@ from dpm.scene import DIFFUSE, Scene
 from dpm.tracer.bsdf import scatter_specular
 from dpm.tracer.bvh import BVH
 from dpm.tracer.sampling import uniform
-from dpm.tracer.traverse import closest_hit, new_stack, spawn_offset
+from dpm.tracer.surface import next_surface
+from dpm.tracer.traverse import new_stack, spawn_offset
 
 MAX_SPECULAR_DEPTH = 256  # specular vertices a camera path may pass before it is dropped
 RR_SPECULAR = 16  # specular vertices before Russian roulette may end a path (also for photons)
@@ -76,20 +77,15 @@ def visible_points_kernel(
             er = eg = eb = 0.0
             hit[i] = False
             for vertex in range(MAX_SPECULAR_DEPTH + 1):
-                t, tri = closest_hit(bvh, ox, oy, oz, dx, dy, dz, np.inf, stack)
+                tri, _, px, py, pz, nx, ny, nz, m, cos_i, front = next_surface(
+                    bvh, sc, ox, oy, oz, dx, dy, dz, stack
+                )
                 if tri < 0:
                     break
-                px, py, pz = ox + t * dx, oy + t * dy, oz + t * dz
-                nx, ny, nz = sc.normals[tri, 0], sc.normals[tri, 1], sc.normals[tri, 2]
-                m = sc.material[tri]
-                cos_d = dx * nx + dy * ny + dz * nz
-                front = cos_d < 0  # the front side of a dielectric is outside (air)
                 if front:  # emitters radiate from the front face only
                     er += tr * sc.emission[m, 0]
                     eg += tg * sc.emission[m, 1]
                     eb += tb * sc.emission[m, 2]
-                else:  # face the normal towards the incoming ray
-                    nx, ny, nz, cos_d = -nx, -ny, -nz, -cos_d
                 if sc.kind[m] == DIFFUSE:
                     position[i, 0], position[i, 1], position[i, 2] = px, py, pz
                     normal[i, 0], normal[i, 1], normal[i, 2] = nx, ny, nz
@@ -106,7 +102,7 @@ def visible_points_kernel(
                     tr, tg, tb = tr / q, tg / q, tb / q
                 u = uniform(seed, stream, 2 + 2 * vertex)
                 dx, dy, dz, wr, wg, wb, side = scatter_specular(
-                    sc, m, dx, dy, dz, nx, ny, nz, -cos_d, front, u, True
+                    sc, m, dx, dy, dz, nx, ny, nz, cos_i, front, u, True
                 )
                 tr, tg, tb = tr * wr, tg * wg, tb * wb
                 ox, oy, oz = px + side * eps * nx, py + side * eps * ny, pz + side * eps * nz
