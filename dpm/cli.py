@@ -56,8 +56,18 @@ def _render_parser() -> _Parser:
     p.add_argument("-o", "--output", type=Path, help="image to write: .exr (linear) or .png")
     p.add_argument("--method", choices=IMPLEMENTED + PLANNED, help="rendering method")
     p.add_argument("--spp", type=int, help="samples per pixel")
-    p.add_argument("--photons", type=int, help="emitted photon paths")
-    p.add_argument("--k", type=int, help="nearest photons per estimate")
+    p.add_argument("--photons", type=int, help="emitted photon paths (photon methods)")
+    p.add_argument("--k", type=int, help="nearest photons per estimate (pm)")
+    p.add_argument(
+        "--radius", type=float, help="initial gather radius, scene units (ppm/appm/sppm)"
+    )
+    p.add_argument(
+        "--photons-per-pass", type=int, help="emitted photon paths per pass (ppm/appm/sppm)"
+    )
+    p.add_argument(
+        "--checkpoint", type=Path, metavar="FILE.npz",
+        help="ppm/appm: save statistics here as it goes and resume from it",
+    )  # fmt: skip
     p.add_argument("--seed", type=int, help="random seed (same seed, same image)")
     p.add_argument("--width", type=int, help="image width in pixels (overrides the scene)")
     p.add_argument("--height", type=int, help="image height in pixels (overrides the scene)")
@@ -75,7 +85,7 @@ def render_main(argv: Sequence[str] | None = None) -> int:
         output = args.output or Path(args.scene.stem + ".png")
         if output.suffix.lower() not in (".png", ".exr"):
             raise InputError(f"{output}: output must end in .png or .exr")
-        for path in (output, args.stats):
+        for path in (output, args.stats, args.checkpoint):
             if path is not None and not path.resolve().parent.is_dir():
                 raise InputError(f"{path}: output folder does not exist")
         start = time.perf_counter()
@@ -85,7 +95,8 @@ def render_main(argv: Sequence[str] | None = None) -> int:
         for key, value in scene.render_defaults.items():
             if hasattr(options, key):
                 setattr(options, key, value)
-        for key in ("method", "spp", "photons", "k", "seed", "width", "height", "component"):
+        keys = ("method", "spp", "photons", "k", "seed", "width", "height", "component")
+        for key in keys + ("radius", "photons_per_pass", "checkpoint"):
             if getattr(args, key) is not None:
                 setattr(options, key, getattr(args, key))
         options.progress = not args.quiet and sys.stderr.isatty()

@@ -1,26 +1,36 @@
 """Rendering a loaded scene into a linear RGB image, with per-stage timings.
 
 Every method starts from the same visible points (first diffuse hits of the camera samples);
-`dpm-render --method NAME` and the benchmarks call `render`.
+`dpm-render --method NAME` and the benchmarks call `render`. The photon methods estimate the
+caustic radiance at the visible points (`--component caustic` writes it as the camera sees
+it) and, for the full image, add the path tracer without caustics (`pt-nocaustic`).
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
 from dpm.camera import Camera
+from dpm.density import APPM, PM, PPM, SPPM
+from dpm.density.pm import check_k
+from dpm.density.progressive import run_passes
 from dpm.errors import InputError
 from dpm.scene import Scene
-from dpm.tracer import BVH, build_bvh, intersect, shade, trace_visible_points
+from dpm.tracer import BVH, build_bvh, intersect, shade, trace_photons, trace_visible_points
 
-IMPLEMENTED = ("pt", "pt-nocaustic")
-PLANNED = ("hybrid", "pm", "ppm", "sppm", "appm", "dpm")
+PATH_TRACERS = ("pt", "pt-nocaustic")
+PHOTON_METHODS = ("pm", "ppm", "sppm", "appm")
+IMPLEMENTED = PATH_TRACERS + PHOTON_METHODS
+PLANNED = ("hybrid", "dpm")
 COMPONENTS = ("full", "caustic")
 SAMPLES_PER_STEP = 1 << 16  # pixel samples traced between progress-bar updates
+RADIUS_FRACTION = 1e-3  # default initial radius, as a fraction of the scene's bounding diagonal
+PASSES = 10  # default passes of the progressive methods: photons_per_pass = photons / PASSES
 
 
 @dataclass
@@ -35,6 +45,9 @@ class RenderOptions:
     width: int | None = None
     height: int | None = None
     component: str = "full"
+    radius: float | None = None  # initial radius (scene units); None: RADIUS_FRACTION × diagonal
+    photons_per_pass: int | None = None  # None: photons / PASSES
+    checkpoint: Path | None = None  # ppm/appm: statistics file to resume from and save to
     progress: bool = True
 
 
@@ -54,8 +67,16 @@ def validate(options: RenderOptions) -> None:
         raise InputError(f"unknown method '{options.method}'")
     if options.component not in COMPONENTS:
         raise InputError(f"unknown component '{options.component}'; use full or caustic")
-    if options.method.startswith("pt") and options.component != "full":
+    if options.method in PATH_TRACERS and options.component != "full":
         raise InputError(f"method '{options.method}' renders no separate caustic component")
+    if options.radius is not None and not (np.isfinite(options.radius) and options.radius > 0):
+        raise InputError(
+            f"--radius must be a positive length in scene units (got {options.radius})"
+        )
+    if options.photons_per_pass is not None and options.photons_per_pass < 1:
+        raise InputError("--photons-per-pass must be at least 1")
+    if options.checkpoint is not None and options.method not in ("ppm", "appm"):
+        raise InputError("--checkpoint applies to the progressive methods ppm and appm only")
     for name in ("spp", "k"):
         if getattr(options, name) < 1:
             raise InputError(f"--{name} must be at least 1")
@@ -96,38 +117,89 @@ def check_camera_outside(scene: Scene, bvh: BVH, camera: Camera) -> None:
             )
 
 
+def default_radius(scene: Scene) -> float:
+    """Initial radius of the progressive methods: RADIUS_FRACTION of the bounding diagonal."""
+    lo, hi = scene.bounds
+    return float(RADIUS_FRACTION * np.linalg.norm(np.asarray(hi, np.float64) - lo))
+
+
+def _photon_estimator(scene: Scene, options: RenderOptions) -> PM | PPM | APPM | SPPM:
+    """The density estimator of a photon method, with defaults filled in."""
+    if options.method == "pm":
+        return PM(options.k)
+    radius = options.radius if options.radius is not None else default_radius(scene)
+    per_pass = options.photons_per_pass or max(1, options.photons // PASSES)
+    cls = {"ppm": PPM, "appm": APPM, "sppm": SPPM}[options.method]
+    return cls(radius=radius, photons_per_pass=per_pass)
+
+
 def render(scene: Scene, options: RenderOptions | None = None) -> RenderResult:
     """Render `scene` with `options`; returns the linear RGB image and per-stage statistics."""
     options = options or RenderOptions()
     validate(options)
     camera = scene.camera.with_resolution(options.width, options.height)
     seconds: dict[str, float] = {}
-    stats: dict = {"method": options.method, "seconds": seconds}
+    stats: dict = {"method": options.method, "component": options.component, "seconds": seconds}
 
     start = time.perf_counter()
     bvh = build_bvh(scene)
     seconds["bvh"] = time.perf_counter() - start
     check_camera_outside(scene, bvh, camera)
 
-    w, h, spp = camera.width, camera.height, options.spp
+    method, w, h, spp = options.method, camera.width, camera.height, options.spp
+    estimator = _photon_estimator(scene, options) if method in PHOTON_METHODS else None
+    photons = None
+    if method == "pm":
+        start = time.perf_counter()
+        photons = trace_photons(scene, bvh, options.photons, options.seed, caustic_only=True)
+        seconds["photons"] = time.perf_counter() - start
+        check_k(options.k, photons)
+        stats["caustic_photons"] = len(photons)
     image = np.zeros((h, w, 3), np.float32)
-    rows_per_step = max(1, SAMPLES_PER_STEP // (w * spp))
-    seconds["visible_points"] = seconds["shade"] = 0.0
+    if isinstance(estimator, SPPM):
+        start = time.perf_counter()
+        caustic, stats["caustic_photons"] = estimator.render(
+            scene, bvh, camera, options.photons, options.seed, options.progress
+        )
+        image += caustic
+        seconds["estimate"] = time.perf_counter() - start
+    full = options.component == "full"
+    # The progressive methods keep statistics for every visible point at once.
+    rows_per_step = h if method in ("ppm", "appm") else max(1, SAMPLES_PER_STEP // (w * spp))
+    seconds["visible_points"] = 0.0
+    if full:
+        seconds["shade"] = 0.0
     hits = dropped = 0
-    with tqdm(total=h, unit="row", disable=not options.progress, desc=options.method) as bar:
-        for row0 in range(0, h, rows_per_step):
+    blocks = full or method in ("pm", "ppm", "appm")
+    show = options.progress and rows_per_step < h
+    with tqdm(total=h, unit="row", disable=not show, desc=method) as bar:
+        for row0 in range(0, h if blocks else 0, rows_per_step):
             row1 = min(h, row0 + rows_per_step)
             start = time.perf_counter()
             points = trace_visible_points(scene, bvh, camera, spp, options.seed, (row0, row1))
             seconds["visible_points"] += time.perf_counter() - start
-            start = time.perf_counter()
-            caustics = options.method == "pt"
-            reflected, bad = shade(scene, bvh, points, options.seed, caustics=caustics)
-            radiance = points.emitted + points.throughput * reflected
-            image[row0:row1] = radiance.reshape(row1 - row0, w, spp, 3).mean(axis=2)
-            seconds["shade"] += time.perf_counter() - start
+            radiance = np.zeros((len(points), 3), np.float32)
+            if full:
+                start = time.perf_counter()
+                caustics = method == "pt"
+                reflected, bad = shade(scene, bvh, points, options.seed, caustics=caustics)
+                radiance += points.emitted + points.throughput * reflected
+                seconds["shade"] += time.perf_counter() - start
+                dropped += bad
+            if method in ("pm", "ppm", "appm"):
+                start = time.perf_counter()
+                if photons is not None:
+                    caustic = estimator.estimate(points, photons)
+                else:
+                    caustic, state = run_passes(
+                        estimator, scene, bvh, points, options.photons, options.seed,
+                        checkpoint=options.checkpoint, progress=options.progress,
+                    )  # fmt: skip
+                    stats["caustic_photons"] = state.photons
+                seconds["estimate"] = seconds.get("estimate", 0.0) + time.perf_counter() - start
+                radiance += points.throughput * caustic
+            image[row0:row1] += radiance.reshape(row1 - row0, w, spp, 3).mean(axis=2)
             hits += int(points.hit.sum())
-            dropped += bad
             bar.update(row1 - row0)
     stats.update(
         width=w,
@@ -141,4 +213,8 @@ def render(scene: Scene, options: RenderOptions | None = None) -> RenderResult:
         emitter_triangles=int(len(scene.emitters.triangles)),
         bvh_nodes=bvh.n_nodes,
     )
+    if estimator is not None:
+        stats["photon_paths"] = options.photons
+        if not isinstance(estimator, PM):
+            stats.update(radius=estimator.radius, photons_per_pass=estimator.photons_per_pass)
     return RenderResult(image=image, stats=stats)

@@ -115,7 +115,12 @@ def test_bad_scene_gives_one_line_and_exit_2(case: str, tmp_path: Path, capsys) 
         (["--spp", "-3"], "--spp"),
         (["--seed", "-1"], "--seed"),
         (["--width", "0"], "--width"),
-        (["--method", "ppm"], "not implemented yet"),
+        (["--method", "dpm"], "not implemented yet"),
+        (["--method", "ppm", "--radius", "0"], "--radius"),
+        (["--method", "appm", "--radius", "-0.1"], "--radius"),
+        (["--method", "sppm", "--radius", "nan"], "--radius"),
+        (["--method", "ppm", "--photons-per-pass", "0"], "--photons-per-pass"),
+        (["--method", "pm", "--checkpoint", "c.npz"], "--checkpoint"),
         (["--method", "nonsense"], "invalid choice"),
         (["--component", "caustic"], "caustic"),
         (["--method", "pt-nocaustic", "--component", "caustic"], "caustic"),
@@ -184,3 +189,29 @@ def test_train_config_validation(tmp_path: Path, capsys) -> None:
         err = capsys.readouterr().err
         assert expected in err and len(err.strip().splitlines()) == 1
     assert train_main(["--config", str(tmp_path / "none.toml")]) == 2
+
+
+EGG = Path(__file__).parent.parent / "examples" / "scenes" / "glass_egg.obj"
+
+
+def test_k_above_the_caustic_photon_count_is_one_line(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "out.png"
+    argv = [str(EGG), "-o", str(out), "--quiet", "--width", "8", "--height", "8"]
+    code, err = run_render(capsys, [*argv, "--method", "pm", "--photons", "2000", "--k", "5000"])
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert "--k 5000 is more than the" in err and "caustic photons" in err
+    assert not out.exists()
+
+
+def test_a_corrupt_or_foreign_checkpoint_is_one_line(tmp_path: Path, capsys) -> None:
+    out, checkpoint = tmp_path / "out.png", tmp_path / "ppm.npz"
+    argv = [str(EGG), "-o", str(out), "--quiet", "--width", "8", "--height", "8", "--spp", "1"]
+    argv += ["--method", "ppm", "--photons", "20000", "--checkpoint", str(checkpoint)]
+    checkpoint.write_bytes(b"PK\x03\x04 truncated")
+    code, err = run_render(capsys, argv)
+    assert code == 2 and "not a readable checkpoint" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+    checkpoint.unlink()
+    assert run_render(capsys, argv)[0] == 0 and checkpoint.exists()
+    code, err = run_render(capsys, [*argv, "--seed", "5"])
+    assert code == 2 and "checkpoint of another run" in err

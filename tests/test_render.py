@@ -12,8 +12,12 @@ import numpy as np
 
 from dpm import load_scene
 from dpm.cli import render_main
+from dpm.density import PM
 from dpm.io import read_exr
 from dpm.render import RenderOptions, render
+from dpm.tracer import build_bvh, trace_photons, trace_visible_points
+
+EXAMPLES = Path(__file__).parent.parent / "examples" / "scenes"
 
 
 def test_same_seed_same_image_for_any_thread_count(scene_path: Path) -> None:
@@ -62,3 +66,31 @@ def test_pt_and_pt_nocaustic_share_visible_points_and_random_numbers(scene_path:
     full = render(scene, opts).image
     opts.method = "pt-nocaustic"
     np.testing.assert_array_equal(full, render(scene, opts).image)
+
+
+def test_caustic_component_is_the_estimate_times_the_camera_throughput() -> None:
+    scene = load_scene(EXAMPLES / "glass_egg.obj")
+    opts = RenderOptions(method="pm", spp=2, width=16, height=16, photons=50_000, k=20,
+                         seed=2, component="caustic", progress=False)  # fmt: skip
+    caustic = render(scene, opts)
+    assert caustic.stats["caustic_photons"] > 20 and caustic.image.max() > 0
+    bvh = build_bvh(scene)
+    points = trace_visible_points(scene, bvh, scene.camera.with_resolution(16, 16), 2, 2, (0, 16))
+    photons = trace_photons(scene, bvh, 50_000, seed=2, caustic_only=True)
+    expected = points.throughput * PM(k=20).estimate(points, photons)
+    np.testing.assert_allclose(caustic.image, expected.reshape(16, 16, 2, 3).mean(axis=2))
+    # full = pt-nocaustic + caustic, from the same visible points.
+    opts.component = "full"
+    full = render(scene, opts).image
+    rest = render(scene, RenderOptions(method="pt-nocaustic", spp=2, width=16, height=16,
+                                       seed=2, progress=False)).image  # fmt: skip
+    np.testing.assert_allclose(full, rest + caustic.image, rtol=1e-5, atol=1e-6)
+
+
+def test_a_scene_without_specular_surfaces_has_a_black_caustic_image(scene_path: Path) -> None:
+    scene = load_scene(scene_path)
+    for method in ("pm", "ppm", "appm", "sppm"):
+        opts = RenderOptions(method=method, spp=1, width=8, height=8, photons=5000,
+                             component="caustic", progress=False)  # fmt: skip
+        result = render(scene, opts)
+        assert result.stats["caustic_photons"] == 0 and not result.image.any(), method

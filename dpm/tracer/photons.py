@@ -4,11 +4,17 @@ Photon path j is random stream j: dimensions 0–4 choose the light, the point a
 direction; bounce b uses dimensions 5 + 3b … 7 + 3b (Fresnel or roulette, then a direction or
 roulette on long specular chains). Paths are traced in chunks, each path
 into its own fixed slots, and compacted in path order, so the map does not depend on the
-thread count.
+thread count, and paths a..b traced on their own equal the same paths of a longer run (a
+progressive method's passes are consecutive slices of one stream).
+
+Caustic-only tracing may aim the emitted direction at a sphere bounding the specular
+surfaces (`guided`): a caustic path must hit a specular surface first, so nothing is lost,
+and a reference spends its time on paths that can become caustics.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numba as nb
@@ -19,7 +25,7 @@ from dpm.scene import DIFFUSE, Scene
 from dpm.tracer.bsdf import scatter_specular
 from dpm.tracer.bvh import BVH
 from dpm.tracer.lights import sample_light_point
-from dpm.tracer.sampling import sample_cosine, uniform
+from dpm.tracer.sampling import orthonormal_basis, sample_cosine, uniform
 from dpm.tracer.surface import next_surface
 from dpm.tracer.traverse import new_stack, spawn_offset
 from dpm.tracer.visible import RR_SPECULAR, RR_SURVIVAL
@@ -52,10 +58,76 @@ class PhotonMap:
             self.caustic[mask], self.bounces[mask], self.path[mask], self.n_paths,
         )  # fmt: skip
 
+    def first(self, n_paths: int) -> PhotonMap:
+        """The photons of the first n_paths paths, as the map a run of n_paths would give."""
+        if not 1 <= n_paths <= self.n_paths:
+            raise ValueError(f"n_paths must be from 1 to {self.n_paths}")
+        return self.split(n_paths)[0]
+
+    def split(self, paths_per_pass: int) -> list[PhotonMap]:
+        """Consecutive passes of paths_per_pass emitted paths each (the last may be shorter).
+
+        Each pass is a photon map of its own: its flux is divided by its own path count.
+        """
+        if paths_per_pass < 1:
+            raise ValueError("paths_per_pass must be at least 1")
+        first = np.arange(0, max(self.n_paths, 1), paths_per_pass)
+        cuts = np.searchsorted(self.path, np.append(first, self.n_paths))
+        passes = []
+        for i, p0 in enumerate(first):
+            n = min(paths_per_pass, self.n_paths - p0)
+            part = slice(cuts[i], cuts[i + 1])
+            scale = np.float32(self.n_paths / max(n, 1))
+            passes.append(
+                PhotonMap(
+                    self.position[part],
+                    self.direction[part],
+                    self.flux[part] * scale,
+                    self.normal[part],
+                    self.caustic[part],
+                    self.bounces[part],
+                    self.path[part] - p0,
+                    n,
+                )  # fmt: skip
+            )
+        return passes
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def sample_emission(sc, lt, ox, oy, oz, guide, u1, u2):
+    """(direction, cosθ at the light / its density in sr⁻¹) of an emitted photon.
+
+    guide = (cx, cy, cz, radius) aims uniformly into the cone of that sphere when the light
+    point lies outside it; radius < 0 (or a point inside) samples cosθ/π about the normal.
+    """
+    nx, ny, nz = sc.normals[lt, 0], sc.normals[lt, 1], sc.normals[lt, 2]
+    wx, wy, wz = guide[0] - ox, guide[1] - oy, guide[2] - oz
+    d2 = wx * wx + wy * wy + wz * wz
+    r2 = guide[3] * guide[3]
+    if guide[3] < 0 or d2 <= r2:
+        dx, dy, dz = sample_cosine(nx, ny, nz, u1, u2)
+        return dx, dy, dz, np.pi
+    d = math.sqrt(d2)
+    wx, wy, wz = wx / d, wy / d, wz / d
+    cos_max = math.sqrt(1.0 - r2 / d2)
+    one_minus = (r2 / d2) / (1.0 + cos_max)  # 1 − cosθmax without cancellation
+    cos_t = 1.0 - u1 * one_minus
+    sin_t = math.sqrt(max(0.0, 1.0 - cos_t * cos_t))
+    ux, uy, uz, vx, vy, vz = orthonormal_basis(wx, wy, wz)
+    phi = 2.0 * np.pi * u2
+    x, y = sin_t * math.cos(phi), sin_t * math.sin(phi)
+    dx = x * ux + y * vx + cos_t * wx
+    dy = x * uy + y * vy + cos_t * wy
+    dz = x * uz + y * vz + cos_t * wz
+    cos_light = dx * nx + dy * ny + dz * nz
+    if cos_light <= 0:
+        return dx, dy, dz, 0.0  # behind the light: this path carries nothing
+    return dx, dy, dz, cos_light * 2.0 * np.pi * one_minus
+
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
 def photon_kernel(
-    bvh, depth, sc, path0, n_paths, total, seed, eps, caustic_only,
+    bvh, depth, sc, path0, n_paths, total, seed, eps, caustic_only, guide,
     position, direction, flux, normal, caustic, bounces, count,
 ):  # fmt: skip
     """Trace paths path0..path0+n_paths-1; path j fills slots [j, :count[j]] of the outputs.
@@ -70,10 +142,14 @@ def photon_kernel(
             sc, uniform(seed, stream, 0), uniform(seed, stream, 1), uniform(seed, stream, 2)
         )
         nx, ny, nz = sc.normals[lt, 0], sc.normals[lt, 1], sc.normals[lt, 2]
-        dx, dy, dz = sample_cosine(nx, ny, nz, uniform(seed, stream, 3), uniform(seed, stream, 4))
-        # Flux Le·cos/(pdf_area·pdf_dir) = Le·π/pdf_area, per emitted path.
+        dx, dy, dz, weight = sample_emission(
+            sc, lt, ox, oy, oz, guide, uniform(seed, stream, 3), uniform(seed, stream, 4)
+        )
+        if weight == 0.0:
+            continue
+        # Flux Le·cos/(pdf_area·pdf_dir) per emitted path (Le·π/pdf_area for cosine sampling).
         e = sc.emission[sc.material[lt]]
-        scale = np.pi / (area_pdf * total)
+        scale = weight / (area_pdf * total)
         fr, fg, fb = e[0] * scale, e[1] * scale, e[2] * scale
         ox, oy, oz = ox + eps * nx, oy + eps * ny, oz + eps * nz
         specular = diffuse = False
@@ -130,9 +206,19 @@ def trace_photons(
     seed: int = 0,
     caustic_only: bool = False,
     progress: bool = False,
+    first_path: int = 0,
+    guided: bool = False,
 ) -> PhotonMap:
-    """Emit n_paths photon paths from the scene's lights and store their diffuse hits."""
+    """Emit n_paths photon paths from the scene's lights and store their diffuse hits.
+
+    The paths are numbers first_path … first_path + n_paths − 1 of the seed's stream; the
+    map's `path` counts from 0. `guided` (caustic_only only) aims emission at the specular
+    surfaces' bounding sphere.
+    """
+    if guided and not caustic_only:
+        raise ValueError("guided emission finds caustic photons only; pass caustic_only=True")
     sc, eps = scene.kernel_arrays(), spawn_offset(scene)
+    guide = specular_bounding_sphere(scene) if guided else np.array([0.0, 0.0, 0.0, -1.0])
     parts: list[tuple[np.ndarray, ...]] = []
     slots = 1 if caustic_only else MAX_STORED
     with tqdm(total=n_paths, unit="path", disable=not progress, desc="photons") as bar:
@@ -143,8 +229,8 @@ def trace_photons(
             bounces = np.zeros((n, slots), np.uint16)
             count = np.zeros(n, np.int32)
             photon_kernel(
-                bvh.arrays, bvh.depth, sc, path0, n, n_paths, seed, eps, caustic_only,
-                pos, dirs, flux, nrm, caustic, bounces, count,
+                bvh.arrays, bvh.depth, sc, first_path + path0, n, n_paths, seed, eps,
+                caustic_only, guide, pos, dirs, flux, nrm, caustic, bounces, count,
             )  # fmt: skip
             used = np.arange(slots)[None, :] < count[:, None]  # (n, slots), path-major order
             path = np.broadcast_to(np.arange(path0, path0 + n)[:, None], used.shape)
@@ -152,3 +238,15 @@ def trace_photons(
             bar.update(n)
     cols = [np.concatenate(c) for c in zip(*parts, strict=True)]
     return PhotonMap(*cols[:6], cols[6].astype(np.int64), n_paths)
+
+
+def specular_bounding_sphere(scene: Scene) -> np.ndarray:
+    """(4,) float64 centre and radius of a sphere holding every specular triangle (−1: none)."""
+    specular = scene.materials.kind[scene.material] != DIFFUSE
+    if not specular.any():
+        return np.array([0.0, 0.0, 0.0, -1.0])
+    v = scene.triangles[specular].reshape(-1, 3).astype(np.float64)
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    centre = (lo + hi) / 2
+    radius = np.sqrt(((v - centre) ** 2).sum(axis=1).max())
+    return np.append(centre, radius * (1 + 1e-6) + spawn_offset(scene))

@@ -54,14 +54,19 @@ def sample_triangle(tri, u1, u2):
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
-def sample_cosine(nx, ny, nz, u1, u2):
-    """A unit direction about unit normal n with density cosθ/π (solid angle)."""
-    # Orthonormal basis without branches on the normal's sign (Duff et al. 2017).
+def orthonormal_basis(nx, ny, nz):
+    """Two unit tangents (tx, ty, tz, bx, by, bz) completing unit n to a right-handed frame."""
+    # Without branches on the normal's sign (Duff et al. 2017).
     sign = 1.0 if nz >= 0 else -1.0
     a = -1.0 / (sign + nz)
     b = nx * ny * a
-    tx, ty, tz = 1.0 + sign * nx * nx * a, sign * b, -sign * nx
-    bx, by, bz = b, sign + ny * ny * a, -ny
+    return 1.0 + sign * nx * nx * a, sign * b, -sign * nx, b, sign + ny * ny * a, -ny
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def sample_cosine(nx, ny, nz, u1, u2):
+    """A unit direction about unit normal n with density cosθ/π (solid angle)."""
+    tx, ty, tz, bx, by, bz = orthonormal_basis(nx, ny, nz)
     r = math.sqrt(u1)
     phi = 2.0 * math.pi * u2
     x, y = r * math.cos(phi), r * math.sin(phi)

@@ -1,0 +1,125 @@
+"""Adaptive progressive photon mapping (after Kaplanyan & Dachsbacher 2013).
+
+PPM written as a running mean of per-pass kernel estimates (Knaus & Zwicker 2011), with
+each point choosing its bandwidth for the next pass from what earlier passes measured. The
+asymptotic error of a 2D kernel estimate with bandwidth r from N paths is
+    bias² + variance = (r² μ₂ ΔE / 2)² + R(K) g / (N r²),
+(μ₂ = ∫x²K, R(K) = ∫K², g = density of squared per-path photon weights), least at
+    r⁶ = 2 R(K) g / (N μ₂² ΔE²).
+ΔE and g are estimated at each point with the biweight kernel's Laplacian and the kernel
+itself over a pilot bandwidth h that shrinks like PPM's radius (h²ⱼ₊₁ = h²ⱼ (j + α)/(j + 1));
+the chosen r stays within [h / 16, h]: where ΔE ≈ 0 the formula wants an infinite radius,
+and early, noisy Laplacians want a vanishing one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from dpm.density.base import luminance
+from dpm.density.gather import PointIndex
+from dpm.density.kernels import (
+    BIWEIGHT_MOMENT,
+    BIWEIGHT_ROUGHNESS,
+    biweight,
+    biweight_laplacian,
+)
+from dpm.density.ppm import ALPHA, check_progressive
+from dpm.density.progressive import estimate_in_passes
+from dpm.tracer import PhotonMap, VisiblePoints
+
+MIN_FRACTION = 1 / 16  # the smallest bandwidth a point may choose, as a fraction of h
+
+
+@dataclass
+class APPMState:
+    """Per-point statistics of an APPM run over n points after `passes` passes."""
+
+    pilot: float  # current pilot bandwidth h (scene units), the same for all points
+    energy: np.ndarray  # (n, 3) float64 Σ paths_j · E_j of the per-pass estimates (W m⁻²)
+    laplacian: np.ndarray  # (n,) float64 Σ_j ΔE_j, luminance (W m⁻⁴)
+    second: np.ndarray  # (n,) float64 Σ_j g_j, density of squared path weights (W² m⁻²)
+    paths: int = 0  # emitted photon paths so far
+    passes: int = 0
+    alpha: float = ALPHA
+    photons: int = 0  # caustic photons those paths stored
+
+    @classmethod
+    def start(cls, n: int, radius: float, alpha: float = ALPHA) -> APPMState:
+        """A state of n points with pilot bandwidth `radius` and nothing gathered."""
+        return cls(float(radius), np.zeros((n, 3)), np.zeros(n), np.zeros(n), alpha=alpha)
+
+    def bandwidth(self, paths: int) -> np.ndarray:
+        """(n,) float64 bandwidth each point uses for a pass that brings the total to paths."""
+        h = self.pilot
+        if self.passes == 0:
+            return np.full(len(self.second), h)
+        lap, g = self.laplacian / self.passes, self.second / self.passes
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r6 = 2 * BIWEIGHT_ROUGHNESS * g / (paths * BIWEIGHT_MOMENT**2 * lap**2)
+            r = r6 ** (1 / 6)
+        return np.clip(np.nan_to_num(r, nan=h, posinf=h), MIN_FRACTION * h, h)
+
+    def add(self, index: PointIndex, photons: PhotonMap) -> None:
+        """Gather one pass with each point's bandwidth and update the pilot statistics."""
+        n, p = len(self.second), photons.n_paths
+        r = self.bandwidth(self.paths + p)
+        h = self.pilot
+        pairs = index.within(photons, h)
+        w = photons.flux[pairs.photon].astype(np.float64) * p  # per-path photon weights
+        rp = r[pairs.point]
+        k = biweight(pairs.distance / rp) / rp**2
+        energy = np.stack([np.bincount(pairs.point, w[:, c] * k, n) for c in range(3)], 1) / p
+        y = luminance(w)
+        u = pairs.distance / h
+        self.laplacian += np.bincount(pairs.point, y * biweight_laplacian(u), n) / (p * h**4)
+        self.second += np.bincount(pairs.point, y * y * biweight(u), n) / (p * h**2)
+        self.energy += energy * p
+        self.paths += p
+        self.passes += 1
+        self.photons += len(photons)
+        self.pilot = h * np.sqrt((self.passes + self.alpha) / (self.passes + 1))
+
+    def irradiance(self) -> np.ndarray:
+        """(n, 3) float64 caustic irradiance, the path-weighted mean of the passes (W m⁻²)."""
+        return self.energy / max(self.paths, 1)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Everything needed to resume, as named arrays (for a checkpoint)."""
+        return {
+            "pilot": np.float64(self.pilot), "energy": self.energy,
+            "laplacian": self.laplacian, "second": self.second,
+            "paths": np.int64(self.paths), "passes": np.int64(self.passes),
+            "alpha": np.float64(self.alpha), "photons": np.int64(self.photons),
+        }  # fmt: skip
+
+    @classmethod
+    def from_arrays(cls, a: dict[str, np.ndarray]) -> APPMState:
+        """The state `arrays` saved."""
+        return cls(
+            float(a["pilot"]), a["energy"], a["laplacian"], a["second"], int(a["paths"]),
+            int(a["passes"]), float(a["alpha"]), int(a["photons"]),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class APPM:
+    """APPM at fixed visible points: initial pilot radius (scene units), paths per pass."""
+
+    radius: float = 0.01
+    photons_per_pass: int = 10_000
+    alpha: float = ALPHA
+
+    def check(self) -> None:
+        """Raise InputError for unusable parameters."""
+        check_progressive(self.radius, self.photons_per_pass, self.alpha)
+
+    def start(self, n: int) -> APPMState:
+        """The state before the first pass, for n points."""
+        return APPMState.start(n, self.radius, self.alpha)
+
+    def estimate(self, points: VisiblePoints, photons: PhotonMap) -> np.ndarray:
+        """(N, 3) float32 caustic radiance leaving each visible point, passes of the map."""
+        return estimate_in_passes(self, points, photons)

@@ -1,0 +1,101 @@
+"""Gathering photons around visible points with scipy's cKDTree.
+
+Two directions, both chunked so that peak memory stays bounded:
+- `nearest`: a tree over the photons answers the K nearest photons of each point (PM, DPM);
+- `within`: a tree over the points answers, for each photon of a pass, the points whose
+  radius reaches it (the progressive methods, whose points stay put while passes stream by).
+A photon counts only where its surface normal agrees with the point's (within 60°): photons on
+the far side of a thin wall or on a perpendicular wall belong to another surface.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from dpm.tracer import PhotonMap
+
+NORMAL_COS = 0.5  # a photon counts when dot(photon normal, point normal) ≥ this
+POINTS_PER_CHUNK = 1 << 14  # K-nearest queries answered at once
+PHOTONS_PER_CHUNK = 1 << 13  # range queries answered at once
+
+# Seconds spent in tree building and queries since the last reset, so that benchmarks can
+# report gathering apart from estimation (reset by assigning 0.0).
+seconds = 0.0
+
+
+@dataclass(frozen=True)
+class Neighbourhoods:
+    """The K nearest photons of a chunk of points (rows), nearest first."""
+
+    index: np.ndarray  # (n, K) int64 photon index (len(photons) pads when there are fewer)
+    distance: np.ndarray  # (n, K) float64 distance in scene units (inf pads)
+    valid: np.ndarray  # (n, K) bool: a photon whose normal agrees with the point's
+
+
+@dataclass(frozen=True)
+class Pairs:
+    """(point, photon) pairs closer than the point's radius, normals agreeing."""
+
+    point: np.ndarray  # (Q,) int64 index into the points
+    photon: np.ndarray  # (Q,) int64 index into the photons
+    distance: np.ndarray  # (Q,) float64 distance in scene units
+
+
+def _agree(normal_a: np.ndarray, normal_b: np.ndarray) -> np.ndarray:
+    """(…) bool: unit normals (…, 3) within 60° of each other."""
+    return np.einsum("...i,...i->...", normal_a, normal_b) >= NORMAL_COS
+
+
+def nearest(
+    photons: PhotonMap, position: np.ndarray, normal: np.ndarray, k: int
+) -> Iterator[tuple[slice, Neighbourhoods]]:
+    """The k nearest photons of points (N, 3) with normals (N, 3), a chunk of points at a time."""
+    global seconds
+    start = time.perf_counter()
+    tree = cKDTree(photons.position.astype(np.float64))
+    n_photons = len(photons)
+    normals = np.vstack([photons.normal, np.zeros((1, 3), np.float32)])  # pad row: never agrees
+    seconds += time.perf_counter() - start
+    for first in range(0, len(position), POINTS_PER_CHUNK):
+        start = time.perf_counter()
+        rows = slice(first, min(first + POINTS_PER_CHUNK, len(position)))
+        dist, index = tree.query(position[rows].astype(np.float64), k=k, workers=-1)
+        dist, index = dist.reshape(-1, k), index.reshape(-1, k)  # k = 1 drops the axis
+        valid = (index < n_photons) & _agree(normals[index], normal[rows, None, :])
+        seconds += time.perf_counter() - start
+        yield rows, Neighbourhoods(index, dist, valid)
+
+
+class PointIndex:
+    """A cKDTree over fixed points (N, 3) with their normals, queried by passes of photons."""
+
+    def __init__(self, position: np.ndarray, normal: np.ndarray) -> None:
+        self.position = np.asarray(position, np.float64)
+        self.normal = np.asarray(normal, np.float32)
+        self.tree = cKDTree(self.position)
+
+    def within(self, photons: PhotonMap, radius: np.ndarray | float) -> Pairs:
+        """Pairs with distance < radius of the point: radius is (N,) per point or one value."""
+        global seconds
+        begin = time.perf_counter()
+        radius = np.broadcast_to(np.asarray(radius, np.float64), (len(self.position),))
+        reach = float(radius.max(initial=0.0))
+        parts = []
+        for start in range(0, len(photons), PHOTONS_PER_CHUNK):
+            chunk = slice(start, min(start + PHOTONS_PER_CHUNK, len(photons)))
+            other = cKDTree(photons.position[chunk].astype(np.float64))
+            m = self.tree.sparse_distance_matrix(other, reach, output_type="ndarray")
+            point, photon, dist = m["i"], m["j"] + start, m["v"]
+            keep = (dist < radius[point]) & _agree(self.normal[point], photons.normal[photon])
+            parts.append((point[keep], photon[keep], dist[keep]))
+        if not parts:
+            empty = np.zeros(0, np.int64)
+            parts.append((empty, empty, np.zeros(0)))
+        point, photon, dist = (np.concatenate(c) for c in zip(*parts, strict=True))
+        seconds += time.perf_counter() - begin
+        return Pairs(point, photon, dist)

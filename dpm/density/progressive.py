@@ -1,0 +1,128 @@
+"""Running a progressive estimator (PPM, APPM) pass by pass, with checkpoints.
+
+A progressive estimator has `start(n) -> state`, `check()` and `photons_per_pass`; its state
+has `add(index, pass_photons)`, `irradiance()`, `arrays()` and `from_arrays()`. Passes are
+consecutive slices of one photon stream (`trace_photons(first_path=…)`), so the statistics
+after pass j depend only on the seed, and a run resumed from a checkpoint ends bit-identical
+to one that never stopped.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+import time
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from dpm.density.base import reflected
+from dpm.density.gather import PointIndex
+from dpm.errors import InputError
+from dpm.scene import Scene
+from dpm.tracer import BVH, PhotonMap, VisiblePoints, trace_photons
+
+CHECKPOINT_SECONDS = 30.0  # a run writes its statistics at most this often (and at the end)
+
+
+def estimate_in_passes(estimator: Any, points: VisiblePoints, photons: PhotonMap) -> np.ndarray:
+    """(N, 3) float32 radiance at visible points from a photon map split into passes."""
+    estimator.check()
+    out = np.zeros((len(points), 3), np.float32)
+    hit = np.flatnonzero(points.hit)
+    index = PointIndex(points.position[hit], points.normal[hit])
+    state = estimator.start(len(hit))
+    for part in photons.split(estimator.photons_per_pass):
+        state.add(index, part)
+    out[hit] = reflected(points.albedo[hit], state.irradiance())
+    return out
+
+
+def fingerprint(
+    estimator: Any, scene: Scene, points: VisiblePoints, seed: int, guided: bool
+) -> str:
+    """A hash of everything a checkpoint's statistics depend on except the pass count."""
+    h = hashlib.sha256(repr((estimator, seed, guided)).encode())
+    for a in (scene.triangles, scene.material, points.position, points.normal, points.hit):
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()
+
+
+def _save(path: Path, key: str, arrays: dict[str, np.ndarray]) -> None:
+    """Write a checkpoint atomically (temporary file, then rename): never half-written."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".npz")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            np.savez(f, fingerprint=np.str_(key), **arrays)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _load(path: Path, key: str) -> dict[str, np.ndarray]:
+    """The arrays of a checkpoint made for `key`; InputError if corrupt or for another run."""
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            arrays = {name: f[name] for name in f.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+        raise InputError(f"{path}: not a readable checkpoint ({exc})") from None
+    if str(arrays.pop("fingerprint", "")) != key:
+        raise InputError(
+            f"{path}: checkpoint of another run (scene, points, seed or settings differ);"
+            " delete it or choose another file"
+        )
+    return arrays
+
+
+def run_passes(
+    estimator: Any,
+    scene: Scene,
+    bvh: BVH,
+    points: VisiblePoints,
+    n_paths: int,
+    seed: int,
+    checkpoint: Path | None = None,
+    guided: bool = False,
+    progress: bool = False,
+    stop_after: int | None = None,
+) -> tuple[np.ndarray, Any]:
+    """Trace n_paths photon paths pass by pass into the estimator's statistics.
+
+    Returns ((N, 3) float32 radiance at the visible points, final state). With `checkpoint`
+    the statistics are saved every CHECKPOINT_SECONDS and at the end, and an existing file
+    from the same run is resumed. `stop_after` ends after that many passes in total (as an
+    interruption would); `guided` aims emission at the specular surfaces (references).
+    """
+    estimator.check()
+    hit = np.flatnonzero(points.hit)
+    index = PointIndex(points.position[hit], points.normal[hit])
+    state = estimator.start(len(hit))
+    key = fingerprint(estimator, scene, points, seed, guided)
+    if checkpoint is not None and checkpoint.exists():
+        state = type(state).from_arrays(_load(checkpoint, key))
+    per_pass = estimator.photons_per_pass
+    n_passes = -(-n_paths // per_pass)
+    last = n_passes if stop_after is None else min(n_passes, stop_after)
+    saved = time.monotonic()
+    with tqdm(total=n_passes, initial=state.passes, unit="pass", disable=not progress) as bar:
+        for j in range(state.passes, last):
+            first = j * per_pass
+            photons = trace_photons(
+                scene, bvh, min(per_pass, n_paths - first), seed,
+                caustic_only=True, first_path=first, guided=guided,
+            )  # fmt: skip
+            state.add(index, photons)
+            bar.update(1)
+            if checkpoint is not None and time.monotonic() - saved > CHECKPOINT_SECONDS:
+                _save(checkpoint, key, state.arrays())
+                saved = time.monotonic()
+    if checkpoint is not None:
+        _save(checkpoint, key, state.arrays())
+    out = np.zeros((len(points), 3), np.float32)
+    out[hit] = reflected(points.albedo[hit], state.irradiance())
+    return out, state

@@ -1,0 +1,65 @@
+"""The paper's tuning protocol: PPM and APPM each at 30 settings, the best by RMSE per scene.
+
+Settings are 10 initial radii (log-spaced) × 3 photon-path counts per pass; every run sees
+the same photon map, split into passes, and the same visible points.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from dpm.density.appm import APPM
+from dpm.density.ppm import PPM
+from dpm.density.reference import caustic_rmse
+from dpm.tracer import PhotonMap, VisiblePoints
+
+PASSES = (10, 100, 1000)  # passes per run: photons_per_pass = paths / passes
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One setting of one progressive estimator and its error."""
+
+    method: str  # 'ppm' or 'appm'
+    radius: float  # initial radius (scene units)
+    photons_per_pass: int  # emitted paths per pass
+    rmse: float  # caustic RMSE against the reference
+    seconds: float  # gathering and estimation time
+
+
+def radii(diagonal: float, count: int = 10, lo: float = 1e-4, hi: float = 4e-3) -> np.ndarray:
+    """(count,) initial radii log-spaced from lo to hi times the scene diagonal."""
+    return diagonal * np.geomspace(lo, hi, count)
+
+
+def tune(
+    points: VisiblePoints,
+    photons: PhotonMap,
+    reference: np.ndarray,
+    radii: np.ndarray,
+    passes: tuple[int, ...] = PASSES,
+    methods: tuple[str, ...] = ("ppm", "appm"),
+) -> list[Trial]:
+    """Every (method, radius, passes) setting's caustic RMSE against reference (N, 3)."""
+    trials = []
+    for method in methods:
+        cls = {"ppm": PPM, "appm": APPM}[method]
+        for radius in radii:
+            for n in passes:
+                per_pass = max(1, photons.n_paths // n)
+                start = time.perf_counter()
+                estimate = cls(radius=float(radius), photons_per_pass=per_pass).estimate(
+                    points, photons
+                )
+                seconds = time.perf_counter() - start
+                error = caustic_rmse(points, estimate, reference)
+                trials.append(Trial(method, float(radius), per_pass, error, seconds))
+    return trials
+
+
+def best(trials: list[Trial], method: str) -> Trial:
+    """The trial of `method` with the least RMSE."""
+    return min((t for t in trials if t.method == method), key=lambda t: t.rmse)

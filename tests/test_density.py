@@ -1,0 +1,207 @@
+"""Gathering and the classic density estimators: known densities, convergence, resuming."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dpm import load_scene
+from dpm.density import APPM, PM, PPM, SPPM, gather
+from dpm.density.progressive import run_passes
+from dpm.errors import InputError
+from dpm.metrics import rmse
+from dpm.tracer import PhotonMap, VisiblePoints, build_bvh, trace_photons, trace_visible_points
+
+EXAMPLES = Path(__file__).parent.parent / "examples" / "scenes"
+
+
+def plane_density(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """A smooth density on the unit square (integrates to 1)."""
+    return 1 + 0.5 * np.cos(2 * np.pi * x) * np.cos(2 * np.pi * y)
+
+
+def plane_photons(n: int, seed: int, normal_z: float = 1.0) -> PhotonMap:
+    """n photons of total flux 1 W on z = 0, distributed by plane_density (rejection)."""
+    rng = np.random.default_rng(seed)
+    xy = np.zeros((0, 2))
+    while len(xy) < n:
+        c = rng.random((2 * n, 2))
+        keep = rng.random(2 * n) * 1.5 < plane_density(c[:, 0], c[:, 1])
+        xy = np.vstack([xy, c[keep]])
+    position = np.zeros((n, 3), np.float32)
+    position[:, :2] = xy[:n]
+    normal = np.zeros((n, 3), np.float32)
+    normal[:, 2] = normal_z
+    flux = np.full((n, 3), 1 / n, np.float32)
+    return PhotonMap(
+        position, normal.copy(), flux, normal, np.ones(n, bool), np.ones(n, np.uint16),
+        np.arange(n), n,
+    )  # fmt: skip
+
+
+def plane_points(side: int = 16) -> VisiblePoints:
+    """Visible points on a grid inside [0.25, 0.75]² of z = 0, normal +z, albedo 1."""
+    g = np.linspace(0.25, 0.75, side)
+    n = side * side
+    position = np.zeros((n, 3), np.float32)
+    position[:, 0], position[:, 1] = (a.ravel() for a in np.meshgrid(g, g))
+    normal = np.zeros((n, 3), np.float32)
+    normal[:, 2] = 1
+    ones, zeros = np.ones((n, 3), np.float32), np.zeros((n, 3), np.float32)
+    return VisiblePoints(
+        position, normal, ones, ones, zeros, np.ones(n, bool), np.arange(n, dtype=np.int32),
+        np.arange(n),
+    )  # fmt: skip
+
+
+def relative_error(points: VisiblePoints, radiance: np.ndarray) -> float:
+    """RMSE of radiance (N, 3) against the exact ρ/π · E, relative to its mean."""
+    exact = plane_density(points.position[:, 0], points.position[:, 1]) / np.pi
+    return rmse(radiance, exact[:, None].repeat(3, 1)) / float(exact.mean())
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda n: PM(k=int(2 * n**0.5)),  # consistent: K grows, K/n shrinks
+        lambda n: PM(k=int(2 * n**0.5), kernel="cone"),
+        lambda n: PPM(radius=0.08, photons_per_pass=n // 20),
+        lambda n: APPM(radius=0.15, photons_per_pass=n // 20),
+    ],
+    ids=["pm", "pm-cone", "ppm", "appm"],
+)
+def test_estimators_recover_a_known_density(make) -> None:
+    points = plane_points()
+    errors = [relative_error(points, make(n).estimate(points, plane_photons(n, 1))) for n in
+              (10_000, 100_000, 1_000_000)]  # fmt: skip
+    assert errors[0] > errors[1] > errors[2], errors
+    assert errors[2] < 0.05, errors
+
+
+def test_photons_from_the_other_side_are_not_counted() -> None:
+    points = plane_points(8)
+    below = plane_photons(20_000, 2, normal_z=-1.0)  # arrived on the far side of the plane
+    assert not PM(k=50).estimate(points, below).any()
+    assert not PPM(radius=0.1, photons_per_pass=1000).estimate(points, below).any()
+    # Mixed in with photons from the seen side, they change nothing in a range query.
+    above = plane_photons(20_000, 3)
+    both = PhotonMap(
+        *(np.concatenate([getattr(above, f), getattr(below, f)]) for f in
+          ("position", "direction", "flux", "normal", "caustic", "bounces")),
+        np.concatenate([above.path, below.path]), 20_000,
+    )  # fmt: skip
+    order = np.argsort(both.path, kind="stable")
+    both = both.select(order)
+    one_pass = PPM(radius=0.1, photons_per_pass=20_000)
+    np.testing.assert_allclose(
+        one_pass.estimate(points, both), one_pass.estimate(points, above), rtol=1e-6
+    )
+
+
+def test_gathering_matches_brute_force_and_chunking(monkeypatch) -> None:
+    rng = np.random.default_rng(4)
+    photons = plane_photons(3000, 5)
+    photons = PhotonMap(
+        rng.random((3000, 3), dtype=np.float32), photons.direction, photons.flux,
+        rng.choice([-1.0, 1.0], (3000, 1)).astype(np.float32) * [0, 0, 1], photons.caustic,
+        photons.bounces, photons.path, 3000,
+    )  # fmt: skip
+    points = rng.random((200, 3)).astype(np.float32)
+    normal = np.tile(np.float32([0, 0, 1]), (200, 1))
+    d = np.linalg.norm(points[:, None].astype(np.float64) - photons.position[None], axis=2)
+    agree = photons.normal[:, 2] > 0
+    monkeypatch.setattr(gather, "POINTS_PER_CHUNK", 37)
+    monkeypatch.setattr(gather, "PHOTONS_PER_CHUNK", 101)
+    rows = np.vstack([nb.index for _, nb in gather.nearest(photons, points, normal, 10)])
+    valid = np.vstack([nb.valid for _, nb in gather.nearest(photons, points, normal, 10)])
+    np.testing.assert_array_equal(rows, np.argsort(d, axis=1, kind="stable")[:, :10])
+    np.testing.assert_array_equal(valid, agree[rows])
+    radius = rng.uniform(0.02, 0.2, 200)
+    pairs = gather.PointIndex(points, normal).within(photons, radius)
+    found = set(zip(pairs.point.tolist(), pairs.photon.tolist(), strict=True))
+    expected = set(zip(*np.nonzero((d < radius[:, None]) & agree[None]), strict=True))
+    assert found == expected and len(pairs.point) == len(found)
+
+
+@pytest.fixture(scope="module")
+def egg():
+    """The glass egg, its BVH and 32×32 visible points (one sample per pixel)."""
+    scene = load_scene(EXAMPLES / "glass_egg.obj")
+    bvh = build_bvh(scene)
+    points = trace_visible_points(scene, bvh, scene.camera.with_resolution(32, 32), 1, 0, (0, 32))
+    return scene, bvh, points
+
+
+def test_ppm_error_against_a_ten_times_longer_run_falls_with_the_budget(egg) -> None:
+    scene, bvh, points = egg
+    ppm = PPM(radius=0.05, photons_per_pass=20_000)
+    photons = trace_photons(scene, bvh, 20_000_000, seed=1, caustic_only=True)
+    longest = ppm.estimate(points, photons)
+    errors = [rmse(ppm.estimate(points, photons.first(n)), longest) for n in
+              (20_000, 200_000, 2_000_000)]  # fmt: skip
+    assert errors[0] > errors[1] > errors[2] > 0, errors
+
+
+@pytest.mark.parametrize("cls", [PPM, APPM])
+def test_a_resumed_run_ends_bit_identical(cls, egg, tmp_path: Path) -> None:
+    scene, bvh, points = egg
+    estimator = cls(radius=0.05, photons_per_pass=50_000)
+    whole, _ = run_passes(estimator, scene, bvh, points, 400_000, seed=3)
+    checkpoint = tmp_path / "run.npz"
+    part, state = run_passes(
+        estimator, scene, bvh, points, 400_000, seed=3, checkpoint=checkpoint, stop_after=3
+    )
+    assert state.passes == 3 and checkpoint.exists() and not np.array_equal(part, whole)
+    resumed, state = run_passes(estimator, scene, bvh, points, 400_000, 3, checkpoint=checkpoint)
+    assert state.passes == 8
+    np.testing.assert_array_equal(resumed, whole)
+    # In memory, passes of one traced map give the same answer (up to float32 flux rounding).
+    photons = trace_photons(scene, bvh, 400_000, seed=3, caustic_only=True)
+    np.testing.assert_allclose(estimator.estimate(points, photons), whole, rtol=1e-5, atol=1e-7)
+    with pytest.raises(InputError, match="another run"):
+        run_passes(estimator, scene, bvh, points, 400_000, seed=4, checkpoint=checkpoint)
+    checkpoint.write_bytes(b"not a checkpoint")
+    with pytest.raises(InputError, match="not a readable checkpoint"):
+        run_passes(estimator, scene, bvh, points, 400_000, seed=3, checkpoint=checkpoint)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.npz"]  # no temporary left
+
+
+def test_guided_emission_changes_no_expectation(egg) -> None:
+    scene, bvh, points = egg
+    plain = trace_photons(scene, bvh, 4_000_000, seed=5, caustic_only=True)
+    guided = trace_photons(scene, bvh, 200_000, seed=6, caustic_only=True, guided=True)
+    assert len(guided) > 4 * len(plain) * 200_000 / 4_000_000  # it finds caustics faster
+    for m in (plain, guided):
+        assert np.all(np.isfinite(m.flux)) and m.caustic.all()
+    total = [m.flux.astype(np.float64).sum(axis=0) for m in (plain, guided)]
+    np.testing.assert_allclose(total[0], total[1], rtol=0.02)
+    # And per visible point, one pass of PPM (a fixed radius) sees the same caustics.
+    a = PPM(radius=0.1, photons_per_pass=4_000_000).estimate(points, plain)
+    b = PPM(radius=0.1, photons_per_pass=200_000).estimate(points, guided)
+    assert float(a.mean()) == pytest.approx(float(b.mean()), rel=0.05)
+
+
+def test_sppm_and_ppm_see_the_same_caustics(egg) -> None:
+    scene, bvh, _ = egg
+    camera = scene.camera.with_resolution(32, 32)
+    sppm, found = SPPM(radius=0.05, photons_per_pass=50_000).render(
+        scene, bvh, camera, 1_000_000, seed=7
+    )
+    assert found > 0 and sppm.shape == (32, 32, 3)
+    points = trace_visible_points(scene, bvh, camera, 20, 8, (0, 32))
+    photons = trace_photons(scene, bvh, 1_000_000, seed=9, caustic_only=True)
+    ppm = PPM(radius=0.05, photons_per_pass=50_000).estimate(points, photons)
+    image = (points.throughput * ppm).reshape(32, 32, 20, 3).mean(axis=2)
+    assert float(sppm.mean()) == pytest.approx(float(image.mean()), rel=0.1)
+
+
+def test_k_larger_than_the_caustic_photons_is_refused(egg) -> None:
+    scene, bvh, points = egg
+    photons = trace_photons(scene, bvh, 1000, seed=1, caustic_only=True)
+    assert 0 < len(photons) < 500
+    with pytest.raises(InputError, match="more than the"):
+        PM(k=500).estimate(points, photons)
+    none = photons.select(np.zeros(len(photons), bool))  # no caustic photons: black, no error
+    assert not PM(k=500).estimate(points, none).any()
