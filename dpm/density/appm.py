@@ -26,9 +26,8 @@ from dpm.density.kernels import (
     biweight,
     biweight_laplacian,
 )
-from dpm.density.ppm import ALPHA, check_progressive
-from dpm.density.progressive import estimate_in_passes
-from dpm.tracer import PhotonMap, VisiblePoints
+from dpm.density.ppm import ALPHA, Progressive
+from dpm.tracer import PhotonMap
 
 MIN_FRACTION = 1 / 16  # the smallest bandwidth a point may choose, as a fraction of h
 
@@ -105,21 +104,9 @@ class APPMState:
 
 
 @dataclass(frozen=True)
-class APPM:
+class APPM(Progressive):
     """APPM at fixed visible points: initial pilot radius (scene units), paths per pass."""
-
-    radius: float = 0.01
-    photons_per_pass: int = 10_000
-    alpha: float = ALPHA
-
-    def check(self) -> None:
-        """Raise InputError for unusable parameters."""
-        check_progressive(self.radius, self.photons_per_pass, self.alpha)
 
     def start(self, n: int) -> APPMState:
         """The state before the first pass, for n points."""
         return APPMState.start(n, self.radius, self.alpha)
-
-    def estimate(self, points: VisiblePoints, photons: PhotonMap) -> np.ndarray:
-        """(N, 3) float32 caustic radiance leaving each visible point, passes of the map."""
-        return estimate_in_passes(self, points, photons)

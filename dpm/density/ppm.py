@@ -50,18 +50,22 @@ class PPMState:
     def add(self, index: PointIndex, photons: PhotonMap) -> None:
         """Gather one pass of photons (flux divided by its own n_paths) and shrink the radii."""
         pairs = index.within(photons, self.radius)
-        n = len(self.radius)
-        found = np.bincount(pairs.point, minlength=n).astype(np.float64)
         flux = photons.flux[pairs.photon].astype(np.float64) * photons.n_paths
-        phi = np.stack([np.bincount(pairs.point, flux[:, c], minlength=n) for c in range(3)], 1)
+        self.update(pairs.point, flux)
+        self.paths += photons.n_paths
+        self.passes += 1
+        self.photons += len(photons)
+
+    def update(self, point: np.ndarray, flux: np.ndarray) -> None:
+        """Count photons (Q,) found at points `point` with per-path flux (Q, 3); shrink radii."""
+        n = len(self.radius)
+        found = np.bincount(point, minlength=n).astype(np.float64)
+        phi = np.stack([np.bincount(point, flux[:, c], minlength=n) for c in range(3)], 1)
         grown = self.count + self.alpha * found
         ratio = np.divide(grown, self.count + found, out=np.ones(n), where=found > 0)
         self.radius = self.radius * np.sqrt(ratio)
         self.tau = (self.tau + phi) * ratio[:, None]
         self.count = grown
-        self.paths += photons.n_paths
-        self.passes += 1
-        self.photons += len(photons)
 
     def irradiance(self) -> np.ndarray:
         """(n, 3) float64 caustic irradiance E = τ / (π R² paths) (W m⁻²)."""
@@ -85,8 +89,9 @@ class PPMState:
 
 
 @dataclass(frozen=True)
-class PPM:
-    """PPM at fixed visible points: initial radius (scene units), emitted paths per pass."""
+class Progressive:
+    """Parameters of a progressive estimator at fixed visible points: initial radius (scene
+    units), emitted photon paths per pass, α; subclasses say which statistics they keep."""
 
     radius: float = 0.01
     photons_per_pass: int = 10_000
@@ -96,10 +101,15 @@ class PPM:
         """Raise InputError for unusable parameters."""
         check_progressive(self.radius, self.photons_per_pass, self.alpha)
 
-    def start(self, n: int) -> PPMState:
-        """The state before the first pass, for n points."""
-        return PPMState.start(n, self.radius, self.alpha)
-
     def estimate(self, points: VisiblePoints, photons: PhotonMap) -> np.ndarray:
         """(N, 3) float32 caustic radiance leaving each visible point, passes of the map."""
         return estimate_in_passes(self, points, photons)
+
+
+@dataclass(frozen=True)
+class PPM(Progressive):
+    """PPM at fixed visible points: initial radius (scene units), emitted paths per pass."""
+
+    def start(self, n: int) -> PPMState:
+        """The state before the first pass, for n points."""
+        return PPMState.start(n, self.radius, self.alpha)

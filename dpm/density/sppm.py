@@ -16,7 +16,7 @@ from tqdm import tqdm
 
 from dpm.camera import Camera
 from dpm.density.gather import PointIndex
-from dpm.density.ppm import ALPHA, check_progressive
+from dpm.density.ppm import ALPHA, PPMState, check_progressive
 from dpm.scene import Scene
 from dpm.tracer import BVH, trace_photons, trace_visible_points
 
@@ -46,8 +46,7 @@ class SPPM:
         """((H, W, 3) float32 caustic radiance per pixel as the camera sees it, caustic photons)
         from n_paths emitted photon paths."""
         check_progressive(self.radius, self.photons_per_pass, self.alpha)
-        n = camera.width * camera.height
-        radius, count, tau = np.full(n, float(self.radius)), np.zeros(n), np.zeros((n, 3))
+        state = PPMState.start(camera.width * camera.height, self.radius, self.alpha)
         per_pass = self.photons_per_pass
         n_passes = -(-n_paths // per_pass)
         n_photons = 0
@@ -62,17 +61,12 @@ class SPPM:
             n_photons += len(photons)
             hit = np.flatnonzero(points.hit)  # one sample per pixel: row = pixel
             pairs = PointIndex(points.position[hit], points.normal[hit]).within(
-                photons, radius[hit]
+                photons, state.radius[hit]
             )
             pixel = hit[pairs.point]
             weight = points.throughput[pixel].astype(np.float64) * points.albedo[pixel] / np.pi
             flux = photons.flux[pairs.photon].astype(np.float64) * photons.n_paths * weight
-            found = np.bincount(pixel, minlength=n).astype(np.float64)
-            phi = np.stack([np.bincount(pixel, flux[:, c], minlength=n) for c in range(3)], 1)
-            grown = count + self.alpha * found
-            ratio = np.divide(grown, count + found, out=np.ones(n), where=found > 0)
-            radius = radius * np.sqrt(ratio)
-            tau = (tau + phi) * ratio[:, None]
-            count = grown
-        image = tau / (np.pi * radius[:, None] ** 2 * max(n_paths, 1))
+            state.update(pixel, flux)  # PPM's statistics, per pixel
+            state.paths += photons.n_paths
+        image = state.irradiance()  # already weighted by throughput · ρ/π: radiance
         return image.reshape(camera.height, camera.width, 3).astype(np.float32), n_photons
