@@ -21,7 +21,7 @@ from dpm.tracer import PhotonMap
 
 NORMAL_COS = 0.5  # a photon counts when dot(photon normal, point normal) ≥ this
 POINTS_PER_CHUNK = 1 << 14  # K-nearest queries answered at once
-PHOTONS_PER_CHUNK = 1 << 13  # range queries answered at once
+PHOTONS_PER_CHUNK = 1 << 16  # photons of a pass whose points are sought at once
 
 # Seconds spent in tree building and queries since the last reset, so that benchmarks can
 # report gathering apart from estimation (reset by assigning 0.0).
@@ -87,10 +87,17 @@ class PointIndex:
         reach = float(radius.max(initial=0.0))
         parts = []
         for start in range(0, len(photons), PHOTONS_PER_CHUNK):
-            chunk = slice(start, min(start + PHOTONS_PER_CHUNK, len(photons)))
-            other = cKDTree(photons.position[chunk].astype(np.float64))
+            position = photons.position[start : start + PHOTONS_PER_CHUNK].astype(np.float64)
+            # Most photons land where no point's radius reaches (the discs cover a few per
+            # cent of the surfaces): a parallel nearest-point query drops them before the
+            # single-threaded pair search.
+            near, _ = self.tree.query(position, k=1, distance_upper_bound=reach, workers=-1)
+            reached = np.flatnonzero(near <= reach)
+            if len(reached) == 0:
+                continue
+            other = cKDTree(position[reached])
             m = self.tree.sparse_distance_matrix(other, reach, output_type="ndarray")
-            point, photon, dist = m["i"], m["j"] + start, m["v"]
+            point, photon, dist = m["i"], reached[m["j"]] + start, m["v"]
             keep = (dist < radius[point]) & _agree(self.normal[point], photons.normal[photon])
             parts.append((point[keep], photon[keep], dist[keep]))
         if not parts:

@@ -14,16 +14,17 @@ import numba as nb
 import numpy as np
 
 from dpm.scene import DIFFUSE, Scene
-from dpm.tracer.bsdf import scatter_specular
+from dpm.tracer.bsdf import scatter_specular, specular_survival
 from dpm.tracer.bvh import BVH
 from dpm.tracer.lights import light_pdf_solid_angle, sample_light_point
 from dpm.tracer.sampling import sample_cosine, uniform
 from dpm.tracer.surface import next_surface
 from dpm.tracer.traverse import any_hit, new_stack, spawn_offset
-from dpm.tracer.visible import RR_SPECULAR, RR_SURVIVAL, SHADE_DIM0, VisiblePoints
+from dpm.tracer.visible import RR_SPECULAR, SHADE_DIM0, VisiblePoints
 
 MAX_VERTICES = 256  # path vertices after the visible point; Russian roulette ends most sooner
 RR_START = 3  # vertices before Russian roulette may end a path
+RR_SURVIVAL = 0.95  # the most likely survival of Russian roulette at a diffuse vertex
 DIMS_PER_VERTEX = 8  # Fresnel, light pick, light point (2), direction (2), roulette, spare
 SAMPLES_PER_TASK = 64
 
@@ -94,6 +95,7 @@ def shade_one(bvh, sc, seed, stream, eps, caustics, stack, px, py, pz, nx, ny, n
         pdf_b = max(dx * nx + dy * ny + dz * nz, 0.0) * inv_pi
         ox, oy, oz = px + eps * nx, py + eps * ny, pz + eps * nz
         specular = 0  # specular vertices since the last diffuse one
+        start = max(br, bg, bb)  # the chain's weight before its first specular vertex
         found = False
         while vertex < MAX_VERTICES:
             vertex += 1
@@ -119,7 +121,7 @@ def shade_one(bvh, sc, seed, stream, eps, caustics, stack, px, py, pz, nx, ny, n
                 break
             dim = SHADE_DIM0 + DIMS_PER_VERTEX * vertex
             if vertex >= RR_SPECULAR:  # long specular chains too: TIR can trap a path in glass
-                q = min(max(br, bg, bb), RR_SURVIVAL)
+                q = specular_survival(sc, m, front, max(br, bg, bb), start, True)
                 if uniform(seed, stream, dim + 6) >= q:
                     break
                 br, bg, bb = br / q, bg / q, bb / q

@@ -22,13 +22,13 @@ import numpy as np
 from tqdm import tqdm
 
 from dpm.scene import DIFFUSE, Scene
-from dpm.tracer.bsdf import scatter_specular
+from dpm.tracer.bsdf import scatter_specular, specular_survival
 from dpm.tracer.bvh import BVH
 from dpm.tracer.lights import sample_light_point
 from dpm.tracer.sampling import orthonormal_basis, sample_cosine, uniform
 from dpm.tracer.surface import next_surface
 from dpm.tracer.traverse import new_stack, spawn_offset
-from dpm.tracer.visible import RR_SPECULAR, RR_SURVIVAL
+from dpm.tracer.visible import RR_SPECULAR
 
 MAX_BOUNCES = 256  # scattering events a photon path may have; Russian roulette ends most sooner
 MAX_STORED = 32  # photons one path may store (its diffuse hits); the path ends there
@@ -151,6 +151,7 @@ def photon_kernel(
         e = sc.emission[sc.material[lt]]
         scale = weight / (area_pdf * total)
         fr, fg, fb = e[0] * scale, e[1] * scale, e[2] * scale
+        f0 = max(fr, fg, fb)
         ox, oy, oz = ox + eps * nx, oy + eps * ny, oz + eps * nz
         specular = diffuse = False
         for b in range(MAX_BOUNCES + 1):
@@ -188,9 +189,10 @@ def photon_kernel(
                 if b == MAX_BOUNCES:
                     break
                 if b >= RR_SPECULAR:  # total internal reflection can trap a photon in glass
-                    if uniform(seed, stream, dim + 1) >= RR_SURVIVAL:
+                    q = specular_survival(sc, m, front, max(fr, fg, fb), f0, False)
+                    if uniform(seed, stream, dim + 1) >= q:
                         break
-                    fr, fg, fb = fr / RR_SURVIVAL, fg / RR_SURVIVAL, fb / RR_SURVIVAL
+                    fr, fg, fb = fr / q, fg / q, fb / q
                 dx, dy, dz, wr, wg, wb, side = scatter_specular(
                     sc, m, dx, dy, dz, nx, ny, nz, cos_i, front, uniform(seed, stream, dim), False
                 )

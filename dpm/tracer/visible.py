@@ -2,8 +2,8 @@
 
 Sample s of pixel (x, y) is random stream (y·W + x)·spp + s: dimensions 0–1 jitter it inside
 the pixel, dimension 2 + 2i decides the Fresnel event at specular vertex i and 3 + 2i Russian
-roulette there (from vertex RR_SPECULAR on: total internal reflection can trap a path in
-glass for hundreds of bounces, and cutting it off would darken the glass). Every method
+roulette there (from vertex RR_SPECULAR on, only where absorption has lowered the weight:
+see `specular_survival`; a path trapped in clear glass ends at MAX_SPECULAR_DEPTH). Every method
 starts from these same points, so the same seed gives the same visible points whatever the
 method; path tracing from them uses dimensions from SHADE_DIM0 on.
 """
@@ -18,7 +18,7 @@ import numpy as np
 
 from dpm.camera import Camera
 from dpm.scene import DIFFUSE, Scene
-from dpm.tracer.bsdf import scatter_specular
+from dpm.tracer.bsdf import scatter_specular, specular_survival
 from dpm.tracer.bvh import BVH
 from dpm.tracer.sampling import uniform
 from dpm.tracer.surface import next_surface
@@ -26,7 +26,6 @@ from dpm.tracer.traverse import new_stack, spawn_offset
 
 MAX_SPECULAR_DEPTH = 256  # specular vertices a camera path may pass before it is dropped
 RR_SPECULAR = 16  # specular vertices before Russian roulette may end a path (also for photons)
-RR_SURVIVAL = 0.95  # the most likely survival of Russian roulette: trapped paths end too
 SHADE_DIM0 = 2 + 2 * MAX_SPECULAR_DEPTH
 
 
@@ -96,7 +95,7 @@ def visible_points_kernel(
                 if vertex == MAX_SPECULAR_DEPTH:
                     break
                 if vertex >= RR_SPECULAR:
-                    q = min(max(tr, tg, tb), RR_SURVIVAL)
+                    q = specular_survival(sc, m, front, max(tr, tg, tb), 1.0, True)
                     if uniform(seed, stream, 3 + 2 * vertex) >= q:
                         break
                     tr, tg, tb = tr / q, tg / q, tb / q
