@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from dpm.density import gather
+
 RESULTS = Path(__file__).parent / "results" / "gather_memory.md"
 N_PHOTONS, N_POINTS = 10_000_000, 512 * 512
 
@@ -73,7 +75,8 @@ def main() -> None:
         "",
         "Made by `python benchmarks/gather_memory.py`. *data*: peak resident memory after",
         "building the inputs (photon map ≈ 0.5 GB); *peak*: after the estimate. Points are",
-        f"answered {2**14:,} at a time (K nearest) and photons {2**13:,} at a time (PPM).",
+        f"answered {gather.POINTS_PER_CHUNK:,} at a time (K nearest) and photons "
+        f"{gather.PHOTONS_PER_CHUNK:,} at a time (PPM).",
         "",
         "| estimator | seconds | data MiB | peak MiB | added by gathering MiB |",
         "|---|---|---|---|---|",
