@@ -27,13 +27,14 @@ from dpm.density.kernels import (
     biweight_laplacian,
 )
 from dpm.density.ppm import ALPHA, Progressive
+from dpm.density.progressive import Statistics
 from dpm.tracer import PhotonMap
 
 MIN_FRACTION = 1 / 16  # the smallest bandwidth a point may choose, as a fraction of h
 
 
 @dataclass
-class APPMState:
+class APPMState(Statistics):
     """Per-point statistics of an APPM run over n points after `passes` passes."""
 
     pilot: float  # current pilot bandwidth h (scene units), the same for all points
@@ -84,23 +85,6 @@ class APPMState:
     def irradiance(self) -> np.ndarray:
         """(n, 3) float64 caustic irradiance, the path-weighted mean of the passes (W m⁻²)."""
         return self.energy / max(self.paths, 1)
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        """Everything needed to resume, as named arrays (for a checkpoint)."""
-        return {
-            "pilot": np.float64(self.pilot), "energy": self.energy,
-            "laplacian": self.laplacian, "second": self.second,
-            "paths": np.int64(self.paths), "passes": np.int64(self.passes),
-            "alpha": np.float64(self.alpha), "photons": np.int64(self.photons),
-        }  # fmt: skip
-
-    @classmethod
-    def from_arrays(cls, a: dict[str, np.ndarray]) -> APPMState:
-        """The state `arrays` saved."""
-        return cls(
-            float(a["pilot"]), a["energy"], a["laplacian"], a["second"], int(a["paths"]),
-            int(a["passes"]), float(a["alpha"]), int(a["photons"]),
-        )  # fmt: skip
 
 
 @dataclass(frozen=True)

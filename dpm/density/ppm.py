@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dpm.density.gather import PointIndex
-from dpm.density.progressive import estimate_in_passes
+from dpm.density.progressive import Statistics, estimate_in_passes
 from dpm.errors import InputError
 from dpm.tracer import PhotonMap, VisiblePoints
 
@@ -31,7 +31,7 @@ def check_progressive(radius: float, photons_per_pass: int, alpha: float) -> Non
 
 
 @dataclass
-class PPMState:
+class PPMState(Statistics):
     """Per-point statistics of a PPM run over n points after `passes` passes."""
 
     radius: np.ndarray  # (n,) float64 current radius R (scene units)
@@ -70,22 +70,6 @@ class PPMState:
     def irradiance(self) -> np.ndarray:
         """(n, 3) float64 caustic irradiance E = τ / (π R² paths) (W m⁻²)."""
         return self.tau / (np.pi * self.radius[:, None] ** 2 * max(self.paths, 1))
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        """Everything needed to resume, as named arrays (for a checkpoint)."""
-        return {
-            "radius": self.radius, "count": self.count, "tau": self.tau,
-            "paths": np.int64(self.paths), "passes": np.int64(self.passes),
-            "alpha": np.float64(self.alpha), "photons": np.int64(self.photons),
-        }  # fmt: skip
-
-    @classmethod
-    def from_arrays(cls, a: dict[str, np.ndarray]) -> PPMState:
-        """The state `arrays` saved."""
-        return cls(
-            a["radius"], a["count"], a["tau"], int(a["paths"]), int(a["passes"]),
-            float(a["alpha"]), int(a["photons"]),
-        )  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -1,10 +1,10 @@
 """Running a progressive estimator (PPM, APPM) pass by pass, with checkpoints.
 
 A progressive estimator has `start(n) -> state`, `check()` and `photons_per_pass`; its state
-has `add(index, pass_photons)`, `irradiance()`, `arrays()` and `from_arrays()`. Passes are
-consecutive slices of one photon stream (`trace_photons(first_path=…)`), so the statistics
-after pass j depend only on the seed, and a run resumed from a checkpoint ends bit-identical
-to one that never stopped.
+has `add(index, pass_photons)`, `irradiance()` and, from `Statistics`, `arrays()` and
+`from_arrays()`. Passes are consecutive slices of one photon stream
+(`trace_photons(first_path=…)`), so the statistics after pass j depend only on the seed, and a
+run resumed from a checkpoint ends bit-identical to one that never stopped.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ import os
 import tempfile
 import time
 import zipfile
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
@@ -50,6 +51,21 @@ def fingerprint(
     for a in (scene.triangles, scene.material, points.position, points.normal, points.hit):
         h.update(np.ascontiguousarray(a).tobytes())
     return h.hexdigest()
+
+
+class Statistics:
+    """Mixin for a dataclass of per-point statistics: its fields are the checkpoint's arrays."""
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Everything needed to resume: every field as a named array."""
+        return {f.name: np.asarray(getattr(self, f.name)) for f in fields(self)}
+
+    @classmethod
+    def from_arrays(cls, a: dict[str, np.ndarray]) -> Any:
+        """The state `arrays` saved (0-d arrays back to Python numbers)."""
+        return cls(
+            **{f.name: a[f.name] if a[f.name].ndim else a[f.name].item() for f in fields(cls)}
+        )
 
 
 def _save(path: Path, key: str, arrays: dict[str, np.ndarray]) -> None:
