@@ -7,7 +7,7 @@ the same photon map, split into passes, and the same visible points.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -42,8 +42,13 @@ def tune(
     radii: np.ndarray,
     passes: tuple[int, ...] = PASSES,
     methods: tuple[str, ...] = ("ppm", "appm"),
+    estimates: list[np.ndarray] | None = None,
 ) -> list[Trial]:
-    """Every (method, radius, passes) setting's caustic RMSE against reference (N, 3)."""
+    """Every (method, radius, passes) setting's caustic RMSE against reference (N, 3).
+
+    When `estimates` is a list, each trial's (N, 3) radiance is appended to it, so the trials
+    can be rescored against a longer reference without rerunning them.
+    """
     trials = []
     for method in methods:
         cls = {"ppm": PPM, "appm": APPM}[method]
@@ -56,8 +61,18 @@ def tune(
                 )
                 seconds = time.perf_counter() - start
                 error = caustic_rmse(points, estimate, reference)
+                if estimates is not None:
+                    estimates.append(estimate)
                 trials.append(Trial(method, float(radius), per_pass, error, seconds))
     return trials
+
+
+def rescore(
+    trials: list[Trial], estimates: list[np.ndarray], points: VisiblePoints, reference: np.ndarray
+) -> list[Trial]:
+    """The trials with their RMSE recomputed against a new reference (N, 3)."""
+    pairs = zip(trials, estimates, strict=True)
+    return [replace(t, rmse=caustic_rmse(points, e, reference)) for t, e in pairs]
 
 
 def best(trials: list[Trial], method: str) -> Trial:
