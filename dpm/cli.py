@@ -8,7 +8,6 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-import tomllib
 import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -57,7 +56,7 @@ def _render_parser() -> _Parser:
     p.add_argument("--method", choices=IMPLEMENTED + PLANNED, help="rendering method")
     p.add_argument("--spp", type=int, help="samples per pixel")
     p.add_argument("--photons", type=int, help="emitted photon paths (photon methods)")
-    p.add_argument("--k", type=int, help="nearest photons per estimate (pm)")
+    p.add_argument("--k", type=int, help="nearest photons per estimate (pm, dpm)")
     p.add_argument(
         "--radius", type=float, help="initial gather radius, scene units (ppm/appm/sppm)"
     )
@@ -67,6 +66,10 @@ def _render_parser() -> _Parser:
     p.add_argument(
         "--checkpoint", type=Path, metavar="FILE.npz",
         help="ppm/appm: save statistics here as it goes and resume from it",
+    )  # fmt: skip
+    p.add_argument(
+        "--weights", type=Path, metavar="FILE.msgpack",
+        help="dpm: weights from dpm-train (default: the shipped model for --k)",
     )  # fmt: skip
     p.add_argument("--seed", type=int, help="random seed (same seed, same image)")
     p.add_argument("--width", type=int, help="image width in pixels (overrides the scene)")
@@ -96,7 +99,7 @@ def render_main(argv: Sequence[str] | None = None) -> int:
             if hasattr(options, key):
                 setattr(options, key, value)
         keys = ("method", "spp", "photons", "k", "seed", "width", "height", "component")
-        for key in keys + ("radius", "photons_per_pass", "checkpoint"):
+        for key in keys + ("radius", "photons_per_pass", "checkpoint", "weights"):
             if getattr(args, key) is not None:
                 setattr(options, key, getattr(args, key))
         options.progress = not args.quiet and sys.stderr.isatty()
@@ -117,41 +120,24 @@ def render_main(argv: Sequence[str] | None = None) -> int:
     return _run("dpm-render", body)
 
 
-TRAIN_SECTIONS = {"data", "model", "train"}
-
-
-def _check_train_config(path: Path) -> dict:
-    """Read and validate a training config; its full schema arrives with the training issue."""
-    if not path.is_file():
-        raise InputError(f"{path}: file not found")
-    try:
-        config = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: invalid TOML: {exc}") from None
-    unknown = set(config) - TRAIN_SECTIONS
-    if unknown:
-        raise InputError(f"{path}: unknown section(s) {sorted(unknown)}")
-    for section in sorted(TRAIN_SECTIONS):
-        if not isinstance(config.get(section), dict):
-            raise InputError(f"{path}: missing [{section}] table")
-    k = config["model"].get("k")
-    if not isinstance(k, int) or isinstance(k, bool) or k < 1:
-        raise InputError(f"{path}: [model] 'k' must be a positive integer")
-    return config
-
-
 def train_main(argv: Sequence[str] | None = None) -> int:
-    """`dpm-train`: for now validates the config only and says so; returns exit status."""
+    """`dpm-train`: make the training set, train, write the weights; returns exit status."""
     p = _Parser(prog="dpm-train", description="Train a DPM kernel-prediction network.")
     p.add_argument("--config", type=Path, required=True, help="training config (.toml)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars or summary")
     args = p.parse_args(argv)
 
     def body() -> None:
-        _check_train_config(args.config)
-        print(
-            f"dpm-train: {args.config} is a valid config; training is not implemented yet "
-            "(it arrives with the learned-estimator issue), so nothing was trained"
-        )
+        from dpm.nn.train import load_config, train  # imports JAX: only when training
+
+        config = load_config(args.config)
+        _, rows = train(config, progress=not args.quiet and sys.stderr.isatty())
+        if not args.quiet:
+            last = next((r for r in reversed(rows) if r["validation_loss"]), rows[-1])
+            print(
+                f"dpm-train: {len(rows)} steps; validation loss {last['validation_loss']} at "
+                f"step {last['step']}; weights in {Path(config.train.out) / 'model.msgpack'}"
+            )
 
     return _run("dpm-train", body)
 

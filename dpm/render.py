@@ -16,7 +16,7 @@ import numpy as np
 from tqdm import tqdm
 
 from dpm.camera import Camera
-from dpm.density import APPM, PM, PPM, SPPM
+from dpm.density import APPM, PM, PPM, SPPM, Estimator
 from dpm.density.pm import check_k
 from dpm.density.progressive import run_passes
 from dpm.errors import InputError
@@ -24,9 +24,10 @@ from dpm.scene import Scene
 from dpm.tracer import BVH, build_bvh, intersect, shade, trace_photons, trace_visible_points
 
 PATH_TRACERS = ("pt", "pt-nocaustic")
-PHOTON_METHODS = ("pm", "ppm", "sppm", "appm")
+PHOTON_METHODS = ("pm", "ppm", "sppm", "appm", "dpm")
+NEAREST_METHODS = ("pm", "dpm")  # one photon map, K nearest photons per visible point
 IMPLEMENTED = PATH_TRACERS + PHOTON_METHODS
-PLANNED = ("hybrid", "dpm")
+PLANNED = ("hybrid",)
 COMPONENTS = ("full", "caustic")
 SAMPLES_PER_STEP = 1 << 16  # pixel samples traced between progress-bar updates
 RADIUS_FRACTION = 1e-3  # default initial radius, as a fraction of the scene's bounding diagonal
@@ -48,6 +49,7 @@ class RenderOptions:
     radius: float | None = None  # initial radius (scene units); None: RADIUS_FRACTION × diagonal
     photons_per_pass: int | None = None  # None: photons / PASSES
     checkpoint: Path | None = None  # ppm/appm: statistics file to resume from and save to
+    weights: Path | None = None  # dpm: weight file from dpm-train; None: the shipped model for k
     progress: bool = True
 
 
@@ -77,6 +79,8 @@ def validate(options: RenderOptions) -> None:
         raise InputError("--photons-per-pass must be at least 1")
     if options.checkpoint is not None and options.method not in ("ppm", "appm"):
         raise InputError("--checkpoint applies to the progressive methods ppm and appm only")
+    if options.weights is not None and options.method != "dpm":
+        raise InputError("--weights applies to --method dpm only")
     for name in ("spp", "k"):
         if getattr(options, name) < 1:
             raise InputError(f"--{name} must be at least 1")
@@ -123,10 +127,14 @@ def default_radius(scene: Scene) -> float:
     return float(RADIUS_FRACTION * np.linalg.norm(np.asarray(hi, np.float64) - lo))
 
 
-def _photon_estimator(scene: Scene, options: RenderOptions) -> PM | PPM | APPM | SPPM:
+def _photon_estimator(scene: Scene, options: RenderOptions) -> Estimator | SPPM:
     """The density estimator of a photon method, with defaults filled in."""
     if options.method == "pm":
         return PM(options.k)
+    if options.method == "dpm":
+        from dpm.nn.estimator import DPM  # imports JAX: only when asked for
+
+        return DPM(options.k, options.weights)
     radius = options.radius if options.radius is not None else default_radius(scene)
     per_pass = options.photons_per_pass or max(1, options.photons // PASSES)
     cls = {"ppm": PPM, "appm": APPM, "sppm": SPPM}[options.method]
@@ -149,7 +157,7 @@ def render(scene: Scene, options: RenderOptions | None = None) -> RenderResult:
     method, w, h, spp = options.method, camera.width, camera.height, options.spp
     estimator = _photon_estimator(scene, options) if method in PHOTON_METHODS else None
     photons = None
-    if method == "pm":
+    if method in NEAREST_METHODS:
         start = time.perf_counter()
         photons = trace_photons(scene, bvh, options.photons, options.seed, caustic_only=True)
         seconds["photons"] = time.perf_counter() - start
@@ -170,7 +178,7 @@ def render(scene: Scene, options: RenderOptions | None = None) -> RenderResult:
     if full:
         seconds["shade"] = 0.0
     hits = dropped = 0
-    blocks = full or method in ("pm", "ppm", "appm")
+    blocks = full or method in ("pm", "ppm", "appm", "dpm")
     show = options.progress and rows_per_step < h
     with tqdm(total=h, unit="row", disable=not show, desc=method) as bar:
         for row0 in range(0, h if blocks else 0, rows_per_step):
@@ -186,7 +194,7 @@ def render(scene: Scene, options: RenderOptions | None = None) -> RenderResult:
                 radiance += points.emitted + points.throughput * reflected
                 seconds["shade"] += time.perf_counter() - start
                 dropped += bad
-            if method in ("pm", "ppm", "appm"):
+            if method in ("pm", "ppm", "appm", "dpm"):
                 start = time.perf_counter()
                 if photons is not None:
                     caustic = estimator.estimate(points, photons)
@@ -215,6 +223,8 @@ def render(scene: Scene, options: RenderOptions | None = None) -> RenderResult:
     )
     if estimator is not None:
         stats["photon_paths"] = options.photons
-        if not isinstance(estimator, PM):
+        if method in NEAREST_METHODS:
+            stats["k"] = options.k
+        else:
             stats.update(radius=estimator.radius, photons_per_pass=estimator.photons_per_pass)
     return RenderResult(image=image, stats=stats)

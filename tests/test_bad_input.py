@@ -10,7 +10,7 @@ import pytest
 import trimesh
 
 from conftest import FLOOR_AND_LIGHT_MTL, FLOOR_AND_LIGHT_OBJ, write_scene
-from dpm.cli import render_main, train_main
+from dpm.cli import render_main
 
 
 def run_render(capsys, argv: list[str]) -> tuple[int, str]:
@@ -115,7 +115,8 @@ def test_bad_scene_gives_one_line_and_exit_2(case: str, tmp_path: Path, capsys) 
         (["--spp", "-3"], "--spp"),
         (["--seed", "-1"], "--seed"),
         (["--width", "0"], "--width"),
-        (["--method", "dpm"], "not implemented yet"),
+        (["--method", "hybrid"], "not implemented yet"),
+        (["--method", "pm", "--weights", "w.msgpack"], "--weights"),
         (["--method", "ppm", "--radius", "0"], "--radius"),
         (["--method", "appm", "--radius", "-0.1"], "--radius"),
         (["--method", "sppm", "--radius", "nan"], "--radius"),
@@ -170,25 +171,6 @@ def test_real_process_has_no_traceback(tmp_path: Path) -> None:
     )
     assert proc.returncode == 2
     assert proc.stderr.strip() == f"dpm-render: error: {tmp_path / 'nope.obj'}: file not found"
-
-
-def test_train_config_validation(tmp_path: Path, capsys) -> None:
-    good = tmp_path / "good.toml"
-    good.write_text("[data]\n[model]\nk = 50\n[train]\nsteps = 10\n")
-    assert train_main(["--config", str(good)]) == 0
-    assert "not implemented yet" in capsys.readouterr().out
-    for text, expected in (
-        ("[model\n", "invalid TOML"),
-        ("[data]\n[model]\nk = 0\n[train]\n", "'k'"),
-        ("[data]\n[model]\nk = 5\n", "[train]"),
-        ("[data]\n[model]\nk=5\n[train]\n[extra]\n", "unknown section"),
-    ):
-        bad = tmp_path / "bad.toml"
-        bad.write_text(text)
-        assert train_main(["--config", str(bad)]) == 2
-        err = capsys.readouterr().err
-        assert expected in err and len(err.strip().splitlines()) == 1
-    assert train_main(["--config", str(tmp_path / "none.toml")]) == 2
 
 
 EGG = Path(__file__).parent.parent / "examples" / "scenes" / "glass_egg.obj"

@@ -25,7 +25,11 @@ __all__ = ["APPM", "ESTIMATORS", "PM", "PPM", "SPPM", "Estimator", "make_estimat
 
 
 def make_estimator(method: str, **params: Any) -> Estimator:
-    """The estimator called `method` ('pm', 'ppm' or 'appm') with its parameters."""
+    """The estimator called `method` ('pm', 'ppm', 'appm' or 'dpm') with its parameters."""
+    if method == "dpm":
+        from dpm.nn.estimator import DPM  # imports JAX: only when asked for
+
+        return DPM(**params)
     if method not in ESTIMATORS:
-        raise ValueError(f"unknown estimator '{method}'; one of {sorted(ESTIMATORS)}")
+        raise ValueError(f"unknown estimator '{method}'; one of {sorted(ESTIMATORS)} or 'dpm'")
     return ESTIMATORS[method](**params)

@@ -52,12 +52,18 @@ def _agree(normal_a: np.ndarray, normal_b: np.ndarray) -> np.ndarray:
 
 
 def nearest(
-    photons: PhotonMap, position: np.ndarray, normal: np.ndarray, k: int
+    photons: PhotonMap,
+    position: np.ndarray,
+    normal: np.ndarray,
+    k: int,
+    tree: cKDTree | None = None,
 ) -> Iterator[tuple[slice, Neighbourhoods]]:
-    """The k nearest photons of points (N, 3) with normals (N, 3), a chunk of points at a time."""
+    """The k nearest photons of points (N, 3) with normals (N, 3), a chunk of points at a time;
+    `tree` (a cKDTree over photons.position) saves rebuilding it for repeated queries."""
     global seconds
     start = time.perf_counter()
-    tree = cKDTree(photons.position.astype(np.float64))
+    if tree is None:
+        tree = cKDTree(photons.position.astype(np.float64))
     n_photons = len(photons)
     normals = np.vstack([photons.normal, np.zeros((1, 3), np.float32)])  # pad row: never agrees
     seconds += time.perf_counter() - start

@@ -1,0 +1,90 @@
+"""Weight files: a trained network's parameters with what is needed to rebuild it.
+
+A weight file is one msgpack blob (flax.serialization) holding the architecture, base width,
+K and the parameters; `dpm-train` writes one at the end of a run, and the shipped models live
+in `dpm/nn/weights/dpm-K.msgpack`.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import flax.linen as nn
+import numpy as np
+from flax import serialization
+
+from dpm.errors import InputError
+from dpm.nn.model import ARCHITECTURES, make_model
+
+SHIPPED = Path(__file__).parent / "weights"
+
+
+@dataclass(frozen=True)
+class Weights:
+    """A trained network: its architecture, base width, K and parameters."""
+
+    architecture: str  # 'dpm', 'dpm-l' or 'direct'
+    width: int  # base channel count (×4 for 'dpm-l')
+    k: int  # neighbours per visible point it was trained with
+    params: dict  # flax parameter pytree (numpy arrays)
+
+    def model(self) -> nn.Module:
+        """The flax module these parameters belong to."""
+        return make_model(self.architecture, self.width)
+
+
+def save_weights(path: str | Path, weights: Weights) -> None:
+    """Write weights to path atomically (temporary file, then rename)."""
+    path = Path(path)
+    blob = serialization.msgpack_serialize({
+        "architecture": weights.architecture, "width": weights.width, "k": weights.k,
+        "params": serialization.to_state_dict(weights.params),
+    })  # fmt: skip
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(blob)
+        os.chmod(tmp, 0o644)  # mkstemp makes it private
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def load_weights(path: str | Path) -> Weights:
+    """Read a weight file; InputError (one line) when it is missing or not one."""
+    path = Path(path)
+    try:
+        data = serialization.msgpack_restore(path.read_bytes())
+        weights = Weights(
+            str(data["architecture"]), int(data["width"]), int(data["k"]),
+            _to_numpy(data["params"]),
+        )  # fmt: skip
+    except FileNotFoundError:
+        raise InputError(f"{path}: weight file not found") from None
+    except Exception as e:  # msgpack and key errors alike: not a weight file
+        raise InputError(f"{path}: not a dpm weight file ({type(e).__name__})") from None
+    if weights.architecture not in ARCHITECTURES or weights.k < 1 or weights.width < 1:
+        raise InputError(f"{path}: not a dpm weight file (bad architecture, width or k)")
+    return weights
+
+
+def shipped_weights(k: int) -> Path:
+    """Path of the shipped DPM model for K = k; InputError naming the Ks there are."""
+    path = SHIPPED / f"dpm-{k}.msgpack"
+    if not path.exists():
+        ks = sorted(int(p.stem.split("-")[1]) for p in SHIPPED.glob("dpm-*.msgpack"))
+        have = ", ".join(map(str, ks)) if ks else "none yet"
+        raise InputError(f"no shipped DPM model for --k {k} (shipped: {have}); train one with "
+                         "dpm-train and pass --weights")  # fmt: skip
+    return path
+
+
+def _to_numpy(tree: object) -> object:
+    if isinstance(tree, dict):
+        return {key: _to_numpy(value) for key, value in tree.items()}
+    return np.asarray(tree)

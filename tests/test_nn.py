@@ -1,0 +1,328 @@
+"""The learned estimator: pre-processing invariances, jit/vmap inference against a plain
+implementation, training steps, kill-and-resume, weight files and the CLI."""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import replace
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from dpm.cli import render_main, train_main
+from dpm.density import PM
+from dpm.nn.features import flux_map, flux_unmap
+from dpm.nn.infer import Batch, make_predict, neighbourhoods, point_radiance, predict_points
+from dpm.nn.model import make_model
+from dpm.nn.train import (
+    Config,
+    DataConfig,
+    ModelConfig,
+    TrainConfig,
+    init_params,
+    load_config,
+    make_steps,
+    mu_law,
+    train,
+)
+from dpm.nn.weights import Weights, load_weights, save_weights
+from dpm.tracer import PhotonMap, VisiblePoints
+
+ROOT = Path(__file__).parent.parent
+K = 16
+
+
+def plane_photons(n: int, seed: int) -> PhotonMap:
+    """n photons on the plane y = 0 with a lumpy density, random flux and directions."""
+    rng = np.random.default_rng(seed)
+    xz = rng.random((n, 2)) ** 1.5
+    d = rng.normal(size=(n, 3))
+    d[:, 1] = np.abs(d[:, 1]) + 0.1
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    up = np.tile(np.float32([0, 1, 0]), (n, 1))
+    return PhotonMap(
+        np.c_[xz[:, 0], np.zeros(n), xz[:, 1]].astype(np.float32), d.astype(np.float32),
+        (rng.random((n, 3)) * 3 / n).astype(np.float32), up, np.ones(n, bool),
+        np.ones(n, np.uint16), np.arange(n), n,
+    )  # fmt: skip
+
+
+def random_params(model, seed: int) -> dict:
+    """Parameters with every layer random (the last layer too, unlike a fresh init)."""
+    params = init_params(model, K, seed)
+    leaves, tree = jax.tree.flatten(params)
+    keys = jax.random.split(jax.random.key(seed + 1), len(leaves))
+    leaves = [0.5 * jax.random.normal(key, x.shape) for key, x in zip(keys, leaves, strict=True)]
+    return jax.tree.unflatten(tree, leaves)
+
+
+@pytest.fixture(scope="module")
+def one_point() -> Batch:
+    """The K nearest photons of one visible point, as a Batch of one (canonical frame)."""
+    photons = plane_photons(3000, 0)
+    p = np.float32([[0.4, 0.0, 0.5]])
+    n = np.float32([[0, 1, 0]])
+    return next(neighbourhoods(photons, p, n, np.float32([[0.5, 0.6, 0.7]]), K))[1]
+
+
+def estimate(model, params, b: Batch) -> np.ndarray:
+    return np.asarray(make_predict(model)(params, b))[0]
+
+
+def rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """3×3 rotation by angle about the unit axis (Rodrigues)."""
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+
+
+@pytest.mark.parametrize("architecture", ["dpm", "direct"])
+def test_preprocessing_invariances(one_point: Batch, architecture: str) -> None:
+    """Translation and rotation about the normal leave the estimate unchanged; scaling the
+    positions by s scales it by 1/s² (same kernel, s² the area); N × c with each photon's
+    flux ÷ c and the positions ÷ √c (the same irradiance sampled c times more densely)
+    leaves it unchanged."""
+    model = make_model(architecture, 8)
+    params = random_params(model, 3)
+    if architecture == "direct":  # lift its output off the clamp at zero power
+        params["params"]["Dense_2"]["bias"] = params["params"]["Dense_2"]["bias"] + 1.0
+    b = one_point
+    base = estimate(model, params, b)
+    assert np.all(np.isfinite(base)) and base.max() > 0
+    # translation: offsets are relative to the point already; move the whole scene
+    photons = plane_photons(3000, 0)
+    shift = np.float32([3.0, -2.0, 7.5])
+    moved = replace(photons, position=photons.position + shift)
+    p = np.float32([[0.4, 0.0, 0.5]]) + shift
+    b2 = next(neighbourhoods(moved, p, b.normal, b.albedo, K))[1]
+    np.testing.assert_allclose(estimate(model, params, b2), base, rtol=1e-4)
+    # rotation about the normal (any angle), and a tilted plane (rotating the normal too)
+    for axis, angle in ((b.normal[0], 0.7), (b.normal[0], 2.9), (np.float32([1, 0, 0]), 0.4)):
+        r = rotation(np.asarray(axis, np.float64), angle).astype(np.float32)
+        turned = b._replace(offset=b.offset @ r.T, direction=b.direction @ r.T,
+                            normal=b.normal @ r.T)  # fmt: skip
+        np.testing.assert_allclose(estimate(model, params, turned), base, rtol=1e-4)
+    s = 3.7
+    scaled = b._replace(offset=b.offset * s, radius=b.radius * s)
+    np.testing.assert_allclose(estimate(model, params, scaled), base / s**2, rtol=1e-4)
+    c = 8.0
+    denser = b._replace(offset=b.offset / np.sqrt(c), radius=b.radius / np.sqrt(c),
+                        flux=b.flux / c, n_paths=b.n_paths * c)  # fmt: skip
+    np.testing.assert_allclose(estimate(model, params, denser), base, rtol=1e-4)
+
+
+def test_flux_map_is_eq3_and_inverts() -> None:
+    u = jnp.array([0.0, 1e-3, 0.5, 10.0, 1e4])
+    t = (jnp.log(u + 0.01) - jnp.log(0.01)) / (jnp.log(u + 0.01) - jnp.log(0.01) + 1)
+    np.testing.assert_allclose(flux_map(u), 2 * t - 1, atol=1e-6)
+    np.testing.assert_allclose(flux_unmap(flux_map(u)), u, rtol=1e-4, atol=1e-9)
+
+
+def plain_radiance(params: dict, b: Batch, i: int) -> np.ndarray:
+    """A per-point numpy forward pass of KernelNet, written out from the paper."""
+    p = jax.tree.map(np.asarray, params)["params"]
+    n = b.normal[i].astype(np.float64)
+    sign = 1.0 if n[2] >= 0 else -1.0
+    a = -1.0 / (sign + n[2])
+    bb = n[0] * n[1] * a
+    t = np.array([1 + sign * n[0] ** 2 * a, sign * bb, -sign * n[0]])
+    s = np.array([bb, sign + n[1] ** 2 * a, -n[1]])
+    valid = b.valid[i]
+    centre = b.offset[i][valid].sum(axis=0)
+    ang = np.arctan2(centre @ s, centre @ t)
+    t1, t2 = np.cos(ang) * t + np.sin(ang) * s, -np.sin(ang) * t + np.cos(ang) * s
+    frame = np.stack([t1, t2, n])
+    u = np.log1p(b.flux[i] * b.n_paths[i] / 0.01)
+    x = np.concatenate([b.offset[i] @ frame.T / b.radius[i], b.direction[i] @ frame.T,
+                        2 * u / (u + 1) - 1], axis=1)  # fmt: skip
+
+    def dense(layer, h):
+        return h @ layer["kernel"] + layer["bias"]
+
+    h = x
+    for j in range(3):
+        h = np.maximum(dense(p["Extractor_0"][f"Dense_{j}"], h), 0)
+    context = np.concatenate([h[valid].max(axis=0), h[valid].mean(axis=0)])
+    z = np.concatenate([h, np.tile(context, (len(h), 1))], axis=1)
+    for j in range(2):
+        z = np.maximum(dense(p[f"Dense_{j}"], z), 0)
+    z = dense(p["Dense_2"], z)[:, 0] + np.log(np.expm1(1.0))
+    w = np.where(valid, np.log1p(np.exp(z)), 0.0)
+    total = (w[:, None] * b.flux[i]).sum(axis=0)
+    return b.albedo[i] / np.pi * total / (np.pi * b.radius[i] ** 2)
+
+
+def test_jit_vmap_inference_equals_a_plain_per_point_implementation(monkeypatch) -> None:
+    photons = plane_photons(5000, 1)
+    rng = np.random.default_rng(2)
+    n = 200
+    position = np.c_[rng.random(n), np.zeros(n), rng.random(n)].astype(np.float32)
+    normal = np.tile(np.float32([0, 1, 0]), (n, 1))
+    normal[::7] = np.float32([0, -1, 0])  # disagreeing normals: no valid photon, black
+    albedo = rng.uniform(0.2, 0.9, (n, 3)).astype(np.float32)
+    model = make_model("dpm", 8)
+    params = random_params(model, 5)
+    monkeypatch.setattr("dpm.nn.infer.ACTIVATIONS_PER_CHUNK", 64 * K)  # several chunks
+    out = predict_points(make_predict(model), params, photons, position, normal, albedo, K)
+    b = next(neighbourhoods(photons, position, normal, albedo, K))[1]
+    plain = np.array([plain_radiance(params, b, i) if b.valid[i].any() else np.zeros(3)
+                      for i in range(n)])  # fmt: skip
+    assert np.all(out[::7] == 0)
+    np.testing.assert_allclose(out, plain, rtol=2e-4, atol=1e-7)
+
+
+def test_a_fresh_network_is_the_uniform_kernel() -> None:
+    """The kernel predictor's last layer starts at zero: weights 1, i.e. PM (Eq. 1)."""
+    photons = plane_photons(4000, 3)
+    rng = np.random.default_rng(4)
+    n = 100
+    points = VisiblePoints(
+        np.c_[rng.random(n), np.zeros(n), rng.random(n)].astype(np.float32),
+        np.tile(np.float32([0, 1, 0]), (n, 1)), np.full((n, 3), 0.5, np.float32),
+        np.ones((n, 3), np.float32), np.zeros((n, 3), np.float32), np.ones(n, bool),
+        np.arange(n, dtype=np.int32), np.arange(n),
+    )  # fmt: skip
+    model = make_model("dpm", 8)
+    out = predict_points(make_predict(model), init_params(model, K, 0), photons,
+                         points.position, points.normal, points.albedo, K)  # fmt: skip
+    np.testing.assert_allclose(out, PM(k=K).estimate(points, photons), rtol=1e-5)
+
+
+def test_one_training_step_lowers_the_loss_on_a_fixed_batch(one_point: Batch) -> None:
+    photons = plane_photons(3000, 6)
+    rng = np.random.default_rng(7)
+    n = 64
+    position = np.c_[rng.random(n), np.zeros(n), rng.random(n)].astype(np.float32)
+    b = next(neighbourhoods(photons, position, np.tile(np.float32([0, 1, 0]), (n, 1)),
+                            np.full((n, 3), 0.6, np.float32), K))[1]  # fmt: skip
+    target = np.full((n, 3), 0.05, np.float32)
+    for architecture in ("dpm", "dpm-l", "direct"):
+        model = make_model(architecture, 8)
+        optimiser, loss, step = make_steps(model, 1e-3)
+        params = init_params(model, K, 0)
+        before = float(loss(params, b, target))
+        params, _, value = step(params, optimiser.init(params), b, target)
+        assert float(value) == pytest.approx(before)
+        assert float(loss(params, b, target)) < before, architecture
+
+
+def test_mu_law_is_eq4() -> None:
+    v = jnp.array([0.0, 0.01, 1.0, 50.0])
+    np.testing.assert_allclose(mu_law(v), np.log(1 + 5000 * v) / np.log(5001), rtol=1e-6)
+    assert float(mu_law(jnp.array(-1.0))) == 0.0
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory) -> Config:
+    """configs/tiny.toml with its folders moved under a temporary directory."""
+    root = tmp_path_factory.mktemp("tiny")
+    text = (ROOT / "configs" / "tiny.toml").read_text()
+    text = text.replace('"runs/', f'"{root}/')
+    path = root / "tiny.toml"
+    path.write_text(text)
+    return load_config(path)
+
+
+def test_kill_and_resume_gives_the_same_parameters(tiny: Config) -> None:
+    steps = 12
+    whole = replace(tiny, train=replace(tiny.train, steps=steps, out=tiny.train.out + "-whole"))
+    cut = replace(whole, train=replace(whole.train, out=tiny.train.out + "-cut"))
+    params, rows = train(whole, progress=False)
+    with pytest.raises(KeyboardInterrupt):
+        train(cut, progress=False, stop_after=5)
+    assert (Path(cut.train.out) / "checkpoints" / "5").is_dir()
+    assert not (Path(cut.train.out) / "model.msgpack").exists()
+    resumed, resumed_rows = train(cut, progress=False)
+    for a, b in zip(jax.tree.leaves(params), jax.tree.leaves(resumed), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert [r["loss"] for r in rows] == [r["loss"] for r in resumed_rows]
+    assert [int(r["step"]) for r in resumed_rows] == list(range(1, steps + 1))
+    out = Path(cut.train.out)
+    assert (out / "loss.png").stat().st_size > 0
+    w = load_weights(out / "model.msgpack")
+    assert (w.architecture, w.width, w.k) == ("dpm", 8, K)
+
+
+def test_dpm_train_and_render_from_the_command_line(tiny: Config, tmp_path: Path, capsys):
+    config = tmp_path / "cli.toml"
+    text = (ROOT / "configs" / "tiny.toml").read_text()
+    text = text.replace('"runs/data-tiny"', f'"{tiny.data.out}"')
+    text = text.replace('"runs/tiny"', f'"{tmp_path / "run"}"')
+    config.write_text(text)
+    assert train_main(["--config", str(config), "--quiet"]) == 0
+    weights = tmp_path / "run" / "model.msgpack"
+    scene = ROOT / "examples" / "scenes" / "glass_egg.obj"
+    out = tmp_path / "egg.exr"
+    argv = [str(scene), "-o", str(out), "--quiet", "--method", "dpm", "--photons", "20000",
+            "--width", "16", "--height", "12", "--spp", "1", "--component", "caustic"]  # fmt: skip
+    assert render_main([*argv, "--k", str(K), "--weights", str(weights)]) == 0
+    assert out.exists()
+    for extra, expected in (
+        (["--k", "50", "--weights", str(weights)], f"trained with K = {K}"),
+        (["--k", "7"], "no shipped DPM model for --k 7"),
+        (["--k", str(K), "--weights", str(tmp_path / "none.msgpack")], "not found"),
+        (["--k", str(K), "--weights", str(config)], "not a dpm weight file"),
+    ):
+        out.unlink(missing_ok=True)
+        capsys.readouterr()
+        assert render_main([*argv, *extra]) == 2
+        err = capsys.readouterr().err
+        assert expected in err and len(err.strip().splitlines()) == 1, err
+        assert not out.exists()
+
+
+def test_weight_files_round_trip(tmp_path: Path) -> None:
+    model = make_model("dpm-l", 4)
+    params = jax.tree.map(np.asarray, random_params(model, 9))
+    save_weights(tmp_path / "w.msgpack", Weights("dpm-l", 4, K, params))
+    back = load_weights(tmp_path / "w.msgpack")
+    assert (back.architecture, back.width, back.k) == ("dpm-l", 4, K)
+    for a, b in zip(jax.tree.leaves(params), jax.tree.leaves(back.params), strict=True):
+        np.testing.assert_array_equal(a, b)
+    (tmp_path / "bad.msgpack").write_bytes(b"\x93garbage")
+    with pytest.raises(Exception, match="not a dpm weight file"):
+        load_weights(tmp_path / "bad.msgpack")
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("[data\n", "not valid TOML"),
+        ("[model]\nk = 5\n", "[data] needs `out`"),
+        ('[data]\nout = "d"\n[model]\nk = 0\n', "k must be at least 1"),
+        ('[data]\nout = "d"\n[model]\nk = "5"\n', "k must be an integer"),
+        ('[data]\nout = "d"\n[model]\narchitecture = "big"\n', "architecture must be one of"),
+        ('[data]\nout = "d"\nbudgets = [1.5]\n', "list of integers"),
+        ('[data]\nout = "d"\nscenes = 1\n', "validation_scenes"),
+        ('[data]\nout = "d"\n[train]\nsteps = 10\nfoo = 1\n', "unknown key 'foo'"),
+        ('[data]\nout = "d"\n[extra]\n', "unknown table [extra]"),
+    ],
+)
+def test_bad_configs_are_one_line(tmp_path: Path, capsys, text: str, expected: str) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text)
+    assert train_main(["--config", str(bad), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert expected in err and len(err.strip().splitlines()) == 1, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.toml"]
+
+
+def test_committed_configs_load() -> None:
+    for path in sorted((ROOT / "configs").glob("*.toml")):
+        config = load_config(path)
+        assert isinstance(config.data, DataConfig) and isinstance(config.model, ModelConfig)
+        assert isinstance(config.train, TrainConfig)
+        assert tomllib.loads(path.read_text())["data"]["out"].startswith("runs/")
+
+
+def test_point_radiance_is_pure(one_point: Batch) -> None:
+    """The same (params, inputs) under jit, vmap and plain calls give the same radiance."""
+    model = make_model("dpm", 8)
+    params = random_params(model, 11)
+    single = jax.tree.map(lambda a: a[0], one_point)
+    plain = point_radiance(model, params, single)
+    jitted = jax.jit(lambda p, b: point_radiance(model, p, b))(params, single)
+    np.testing.assert_allclose(plain, jitted, rtol=1e-5)
+    np.testing.assert_allclose(estimate(model, params, one_point), plain, rtol=1e-5)
