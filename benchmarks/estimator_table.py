@@ -4,7 +4,8 @@ stage. M = 700,000 gives the glass egg about 15k caustic photons, as in the pape
 
     python benchmarks/estimator_table.py [SCENE ...] [--reference-paths N] [--max-reference-paths N]
 
-Each scene writes benchmarks/results/estimators/SCENE.json; the Markdown table
+Each scene writes benchmarks/results/estimators/SCENE.json and its reference radiance
+benchmarks/results/references_radiance/SCENE.npz (read by dpm_table.py); the Markdown table
 benchmarks/results/estimators.md is rebuilt from every JSON there. References checkpoint to
 benchmarks/results/references/ (not committed): an interrupted run resumes, and a larger
 budget continues the same reference. A reference starts at --reference-paths and grows
@@ -29,7 +30,8 @@ from dpm import load_scene
 from dpm.density import PM, gather
 from dpm.density.reference import Reference, caustic_rmse, ppm_reference
 from dpm.density.tuning import best, radii, rescore, tune
-from dpm.tracer import build_bvh, trace_photons, trace_visible_points
+from dpm.scene import Scene
+from dpm.tracer import BVH, VisiblePoints, build_bvh, trace_photons, trace_visible_points
 
 HERE = Path(__file__).parent
 SCENES = HERE.parent / "examples" / "scenes"
@@ -41,12 +43,31 @@ REFERENCE_PATHS_PER_PASS = 1_000_000  # guided paths
 NOISE_EXPONENT = 0.32  # reference noise ∝ paths^-0.32 (glass egg, 20M to 600M paths)
 
 
+def table_points(scene: Scene, bvh: BVH) -> VisiblePoints:
+    """The table's visible points: one per pixel of a WIDTH-wide image, seed 0."""
+    camera = scene.camera.with_resolution(WIDTH, WIDTH * scene.camera.height // scene.camera.width)
+    return trace_visible_points(scene, bvh, camera, 1, 0, (0, camera.height))
+
+
+def save_reference(name: str, ref: Reference) -> None:
+    """Keep a scene's reference radiance (committed, so later tables need no rerun)."""
+    path = RESULTS / "references_radiance" / f"{name}.npz"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(path, radiance=ref.radiance, noise=ref.noise, paths=ref.n_paths)
+
+
+def load_reference(name: str) -> tuple[np.ndarray, float]:
+    """(N, 3) reference caustic radiance at `table_points` and its noise, as saved."""
+    with np.load(RESULTS / "references_radiance" / f"{name}.npz") as f:
+        return f["radiance"], float(f["noise"])
+
+
 def run_scene(name: str, reference_paths: int, max_reference_paths: int) -> dict:
     """Measure one scene, growing its reference until the ⅕ rule holds; returns the JSON record."""
     scene = load_scene(SCENES / f"{name}.obj")
     bvh = build_bvh(scene)
+    points = table_points(scene, bvh)
     camera = scene.camera.with_resolution(WIDTH, WIDTH * scene.camera.height // scene.camera.width)
-    points = trace_visible_points(scene, bvh, camera, 1, 0, (0, camera.height))
     diagonal = float(np.linalg.norm(np.subtract(*scene.bounds[::-1], dtype=np.float64)))
     reference_seconds = 0.0
 
@@ -101,6 +122,7 @@ def run_scene(name: str, reference_paths: int, max_reference_paths: int) -> dict
         ref = reference(paths)
     for row in rows:
         print(name, row["paths"], {k: v for k, v in row.items() if k != "trials"}, flush=True)
+    save_reference(name, ref)
     return {
         "scene": name, "points": int(points.hit.sum()), "width": camera.width,
         "height": camera.height, "diagonal": diagonal,

@@ -1,0 +1,60 @@
+"""Kernel prediction against direct regression (paper Fig. 6): validation loss against step.
+
+    dpm-train --config configs/dpm-50.toml
+    dpm-train --config configs/direct-50.toml
+    python benchmarks/ablation.py [RUN ...]
+
+Reads each run's metrics.csv (default runs/dpm-50 and runs/direct-50: the same data, K, width,
+batch and steps) and writes benchmarks/results/ablation.png and ablation.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+RESULTS = Path(__file__).parent / "results"
+
+
+def validation(run: Path) -> list[tuple[int, float]]:
+    """(step, validation loss) of a run's metrics.csv."""
+    with (run / "metrics.csv").open() as f:
+        return [(int(r["step"]), float(r["validation_loss"])) for r in csv.DictReader(f)
+                if r["validation_loss"]]  # fmt: skip
+
+
+def main() -> None:
+    """Plot the runs' validation losses and tabulate them at common steps."""
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("runs", nargs="*", type=Path, default=[Path("runs/dpm-50"),
+                                                           Path("runs/direct-50")])  # fmt: skip
+    args = p.parse_args()
+    curves = {run.name: validation(run) for run in args.runs}
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for name, points in curves.items():
+        ax.plot(*zip(*points, strict=True), "o-", ms=3, label=name)
+    ax.set(xlabel="step", ylabel="validation loss (μ-law L2)", yscale="log",
+           title="Kernel prediction vs direct regression")  # fmt: skip
+    ax.legend()
+    fig.tight_layout()
+    RESULTS.mkdir(exist_ok=True)
+    fig.savefig(RESULTS / "ablation.png", dpi=120)
+    common = sorted(set.intersection(*(set(dict(c)) for c in curves.values())))
+    names = list(curves)
+    lines = ["# Kernel prediction against direct regression", "",
+             "Made by `python benchmarks/ablation.py` (see its docstring); plot: ablation.png.",
+             "", "| step | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]  # fmt: skip
+    for step in common[:: max(1, len(common) // 10)] + common[-1:]:
+        lines.append(f"| {step} | " + " | ".join(f"{dict(curves[n])[step]:.5f}" for n in names)
+                     + " |")  # fmt: skip
+    (RESULTS / "ablation.md").write_text("\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()
