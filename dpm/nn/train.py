@@ -8,7 +8,8 @@ one exactly. Loss: L2 between μ-law tone-mapped (μ = 5000, Eq. 4) estimate and
 
 `TrainConfig.out` receives `checkpoints/` (orbax: params, Adam state; every
 `checkpoint_seconds` and at exit, Ctrl-C and SIGTERM included), `metrics.csv` (step, training
-loss, validation loss, seconds), `loss.png` and, at the end, `model.msgpack`.
+loss, validation loss, seconds; step 0 is the fresh network, which for DPM is the uniform
+kernel, i.e. PM-K), `loss.png` and, at the end, `model.msgpack`.
 """
 
 from __future__ import annotations
@@ -253,8 +254,9 @@ def plot_losses(rows: list[dict], path: Path, title: str) -> None:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6, 4))
-    steps = [int(r["step"]) for r in rows]
-    ax.plot(steps, [float(r["loss"]) for r in rows], lw=0.8, label="training (batch)")
+    train = [(int(r["step"]), float(r["loss"])) for r in rows if r["loss"]]
+    if train:
+        ax.plot(*zip(*train, strict=True), lw=0.8, label="training (batch)")
     val = [(int(r["step"]), float(r["validation_loss"])) for r in rows if r["validation_loss"]]
     if val:
         ax.plot(*zip(*val, strict=True), "o-", ms=3, label="validation")
@@ -298,6 +300,9 @@ def train(
         state = manager.restore(done, args=ocp.args.StandardRestore(target))
         params, opt_state = state["params"], state["opt_state"]
     rows = _read_metrics(out / "metrics.csv", done)
+    if not rows:  # step 0: the fresh network (for DPM, the uniform kernel: PM-K)
+        value = f"{float(loss(params, val_batch, val_target)):.6g}"
+        rows.append({"step": 0, "loss": "", "validation_loss": value, "seconds": "0.00"})
 
     def save(at: int) -> None:
         if manager.latest_step() != at:
