@@ -319,10 +319,14 @@ def train(
     start, last_save = time.perf_counter(), time.perf_counter()
     offset = float(rows[-1]["seconds"]) if rows else 0.0
     try:
+
+        def draw(s: int) -> tuple[Batch, np.ndarray]:
+            return sampler.draw(np.random.default_rng((t.seed, s)), t.batch, t.scenes_per_batch)
+
+        ahead = draw(done + 1) if done < t.steps else None
         for s in range(done + 1, t.steps + 1):
-            batch, target = sampler.draw(np.random.default_rng((t.seed, s)), t.batch,
-                                         t.scenes_per_batch)  # fmt: skip
-            params, opt_state, value = step(params, opt_state, batch, target)
+            params, opt_state, value = step(params, opt_state, *ahead)  # runs asynchronously,
+            ahead = draw(s + 1) if s < t.steps else None  # while the next batch is gathered
             done = s
             row = {"step": s, "loss": f"{float(value):.6g}", "validation_loss": "",
                    "seconds": f"{offset + time.perf_counter() - start:.2f}"}  # fmt: skip
