@@ -35,6 +35,9 @@ def main() -> None:
     p.add_argument("runs", nargs="*", type=Path, default=[Path("runs/dpm-50"),
                                                            Path("runs/direct-50")])  # fmt: skip
     args = p.parse_args()
+    missing = [str(run) for run in args.runs if not (run / "metrics.csv").exists()]
+    if missing:
+        raise SystemExit(f"no metrics.csv in {', '.join(missing)}: run dpm-train first")
     curves = {run.name: validation(run) for run in args.runs}
     fig, ax = plt.subplots(figsize=(6, 4))
     for name, points in curves.items():
@@ -50,7 +53,8 @@ def main() -> None:
     lines = ["# Kernel prediction against direct regression", "",
              "Made by `python benchmarks/ablation.py` (see its docstring); plot: ablation.png.",
              "", "| step | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]  # fmt: skip
-    for step in common[:: max(1, len(common) // 10)] + common[-1:]:
+    shown = common[:: max(1, len(common) // 10)]
+    for step in shown + ([common[-1]] if common and shown[-1] != common[-1] else []):
         lines.append(f"| {step} | " + " | ".join(f"{dict(curves[n])[step]:.5f}" for n in names)
                      + " |")  # fmt: skip
     (RESULTS / "ablation.md").write_text("\n".join(lines) + "\n")

@@ -100,7 +100,8 @@ def main() -> None:
     p.add_argument("--weights", type=Path, default=SHIPPED, help="folder of dpm-K.msgpack files")
     args = p.parse_args()
     names = args.scenes or sorted(f.stem for f in (RESULTS / "estimators").glob("*.json"))
-    models = sorted(args.weights.glob("dpm-*.msgpack"), key=lambda q: int(q.stem.split("-")[1]))
+    models = sorted((q for q in args.weights.glob("dpm-*.msgpack") if q.stem[4:].isdigit()),
+                    key=lambda q: int(q.stem[4:]))  # fmt: skip
     if not models:
         raise SystemExit(f"no dpm-K.msgpack in {args.weights}: train one with dpm-train first")
     write_markdown([run_scene(name, models) for name in names], models)

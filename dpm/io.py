@@ -17,7 +17,7 @@ from dpm.errors import InputError
 
 
 @contextlib.contextmanager
-def _atomic(path: Path) -> Iterator[Path]:
+def atomic(path: Path) -> Iterator[Path]:
     """Yield a temporary path beside `path`; on success it replaces `path`, else it is removed."""
     if not path.parent.is_dir():
         raise InputError(f"{path}: output folder does not exist")
@@ -47,7 +47,7 @@ def write_image(path: str | Path, image: np.ndarray) -> None:
     """Write linear RGB (H, W, 3): float32 OpenEXR when the name ends in .exr, else sRGB PNG."""
     path = Path(path)
     image = np.ascontiguousarray(image, dtype=np.float32)
-    with _atomic(path) as tmp:
+    with atomic(path) as tmp:
         if path.suffix.lower() == ".exr":
             header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
             with OpenEXR.File(header, {"RGB": image}) as exr:
@@ -65,5 +65,5 @@ def read_exr(path: str | Path) -> np.ndarray:
 def write_json(path: str | Path, data: dict) -> None:
     """Write a JSON document (e.g. render statistics)."""
     path = Path(path)
-    with _atomic(path) as tmp:
+    with atomic(path) as tmp:
         tmp.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")

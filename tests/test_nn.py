@@ -14,6 +14,7 @@ import pytest
 
 from dpm.cli import render_main, train_main
 from dpm.density import PM
+from dpm.errors import InputError
 from dpm.nn.features import flux_map, flux_unmap
 from dpm.nn.infer import Batch, make_predict, neighbourhoods, point_radiance, predict_points
 from dpm.nn.model import make_model
@@ -21,6 +22,7 @@ from dpm.nn.train import (
     Config,
     DataConfig,
     ModelConfig,
+    Sampler,
     TrainConfig,
     init_params,
     load_config,
@@ -225,14 +227,26 @@ def tiny(tmp_path_factory) -> Config:
     return load_config(path)
 
 
-def test_kill_and_resume_gives_the_same_parameters(tiny: Config) -> None:
+def test_kill_and_resume_gives_the_same_parameters(tiny: Config, monkeypatch) -> None:
     steps = 12
     whole = replace(tiny, train=replace(tiny.train, steps=steps, out=tiny.train.out + "-whole"))
     cut = replace(whole, train=replace(whole.train, out=tiny.train.out + "-cut"))
     params, rows = train(whole, progress=False)
+    # Ctrl-C while the batch of step 6 is gathered (step 5 is computing): the 7th draw
+    # (validation, then steps 1 … 6); step 5's result is not kept, so 4 is the last saved
+    draw, calls = Sampler.draw, []
+
+    def interrupted(self, *args):
+        calls.append(1)
+        if len(calls) == 7:
+            raise KeyboardInterrupt
+        return draw(self, *args)
+
+    monkeypatch.setattr(Sampler, "draw", interrupted)
     with pytest.raises(KeyboardInterrupt):
-        train(cut, progress=False, stop_after=5)
-    assert (Path(cut.train.out) / "checkpoints" / "5").is_dir()
+        train(cut, progress=False)
+    monkeypatch.setattr(Sampler, "draw", draw)
+    assert sorted(p.name for p in (Path(cut.train.out) / "checkpoints").iterdir()) == ["4"]
     assert not (Path(cut.train.out) / "model.msgpack").exists()
     resumed, resumed_rows = train(cut, progress=False)
     for a, b in zip(jax.tree.leaves(params), jax.tree.leaves(resumed), strict=True):
@@ -282,8 +296,11 @@ def test_weight_files_round_trip(tmp_path: Path) -> None:
     for a, b in zip(jax.tree.leaves(params), jax.tree.leaves(back.params), strict=True):
         np.testing.assert_array_equal(a, b)
     (tmp_path / "bad.msgpack").write_bytes(b"\x93garbage")
-    with pytest.raises(Exception, match="not a dpm weight file"):
+    with pytest.raises(InputError, match="not a dpm weight file"):
         load_weights(tmp_path / "bad.msgpack")
+    save_weights(tmp_path / "other.msgpack", Weights("dpm", 4, K, params))  # dpm-l's params
+    with pytest.raises(InputError, match="do not fit a dpm network of width 4"):
+        load_weights(tmp_path / "other.msgpack")
 
 
 @pytest.mark.parametrize(
@@ -298,9 +315,14 @@ def test_weight_files_round_trip(tmp_path: Path) -> None:
         ('[data]\nout = "d"\nscenes = 1\n', "validation_scenes"),
         ('[data]\nout = "d"\n[train]\nsteps = 10\nfoo = 1\n', "unknown key 'foo'"),
         ('[data]\nout = "d"\n[extra]\n', "unknown table [extra]"),
+        ('[data]\nout = "d"\nreference_radius = 0\n', "reference_radius"),
+        ('[data]\nout = "d"\n[train]\nbatch = 2\nscenes_per_batch = 4\n', "batch must"),
     ],
 )
-def test_bad_configs_are_one_line(tmp_path: Path, capsys, text: str, expected: str) -> None:
+def test_bad_configs_are_one_line(
+    tmp_path: Path, capsys, monkeypatch, text: str, expected: str
+) -> None:
+    monkeypatch.chdir(tmp_path)  # the configs' folders are relative: nothing may appear here
     bad = tmp_path / "bad.toml"
     bad.write_text(text)
     assert train_main(["--config", str(bad), "--quiet"]) == 2

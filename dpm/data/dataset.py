@@ -14,8 +14,6 @@ made in parallel worker processes, and each depends only on (seed, index).
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
@@ -28,8 +26,10 @@ from tqdm import tqdm
 from dpm.data.builder import write_scene
 from dpm.data.procedural import random_scene
 from dpm.errors import InputError
+from dpm.io import atomic
 
 MANIFEST = "manifest.json"
+GENERATOR = 2  # bump when dpm.data.procedural or the shard content changes: old sets are refused
 
 
 @dataclass(frozen=True)
@@ -52,6 +52,7 @@ class DataConfig:
         for key in ("out", "scenes", "workers"):
             d.pop(key)
         d["budgets"] = list(self.budgets)
+        d["generator"] = GENERATOR
         return d
 
 
@@ -96,15 +97,8 @@ def make_shard(config: DataConfig, index: int) -> dict:
         photons[str(budget)] = len(pm)
     path = out / "shards" / f"{shard_name(index)}.npz"
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".npz")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez_compressed(f, **arrays)
-        os.chmod(tmp, 0o644)  # mkstemp makes it private
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic(path) as tmp, tmp.open("wb") as f:
+        np.savez_compressed(f, **arrays)
     return {
         "index": index, "file": f"shards/{path.name}", "points": len(keep),
         "caustic_photons": photons, "reference_noise": ref.noise,
@@ -119,17 +113,20 @@ def read_manifest(out: Path) -> dict | None:
     if not path.exists():
         return None
     try:
-        return json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError):
-        raise InputError(f"{path}: not a dpm training-set manifest (unreadable JSON)") from None
+        manifest = json.loads(path.read_text())
+        if not isinstance(manifest["config"], dict) or not all(
+            isinstance(e["index"], int) and isinstance(e["file"], str) for e in manifest["shards"]
+        ):
+            raise TypeError
+    except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError):
+        raise InputError(f"{path}: not a dpm training-set manifest") from None
+    return manifest
 
 
 def write_manifest(out: Path, manifest: dict) -> None:
     """Write the manifest atomically."""
-    fd, tmp = tempfile.mkstemp(dir=out, prefix=".manifest.", suffix=".json")
-    with os.fdopen(fd, "w") as f:
-        json.dump(manifest, f, indent=1)
-    os.replace(tmp, out / MANIFEST)
+    with atomic(out / MANIFEST) as tmp:
+        tmp.write_text(json.dumps(manifest, indent=1))
 
 
 def build(config: DataConfig, progress: bool = True) -> dict:
@@ -161,7 +158,8 @@ def build(config: DataConfig, progress: bool = True) -> dict:
         bar.close()
         if pool is not None:
             pool.shutdown(cancel_futures=True)
-    return manifest
+    # a set made for more scenes serves a config asking for fewer: scenes 0 … scenes-1 only
+    return {**manifest, "shards": [e for e in manifest["shards"] if e["index"] < config.scenes]}
 
 
 def load_shard(out: Path, entry: dict, budgets: tuple[int, ...]) -> dict[str, np.ndarray]:
@@ -173,5 +171,5 @@ def load_shard(out: Path, entry: dict, budgets: tuple[int, ...]) -> dict[str, np
             wanted += [f"{b}/{n}" for b in budgets for n in ("position", "direction", "flux",
                                                               "normal")]  # fmt: skip
             return {name: f[name] for name in wanted}
-    except (OSError, KeyError, ValueError) as e:
+    except Exception as e:  # OSError, KeyError, BadZipFile, zlib.error, ValueError alike
         raise InputError(f"{path}: unreadable training shard ({type(e).__name__})") from None

@@ -1,8 +1,9 @@
 """Procedural training scenes (paper §4.3): bumpy primitives in a box under area lights.
 
 1–16 primitives (sphere, box, cylinder, capsule, torus) with random size, rotation and a
-random bump displacement stand roughly on a grid in an open-fronted diffuse box; 2–4 square
-area lights at random positions in its upper half look at random points of the floor; each
+random bump displacement stand (or float) roughly on a grid in an open-fronted diffuse box,
+below TOP; 2–4 square area lights at random positions above them look at random points of
+the floor; each
 object is diffuse, mirror or dielectric at random (at least one specular). Everything is
 drawn from `numpy.random.default_rng((seed, index))`, so scene `index` is the same whoever
 makes it.
@@ -31,6 +32,8 @@ from dpm.data.builder import (
 
 HALF = 2.0  # the box spans [-HALF, HALF] in x and z
 HEIGHT = 3.0
+TOP = 1.5  # objects stay below this height, lights above LIGHTS[0]
+LIGHTS = (1.75, 2.8)  # height range of the lights' centres
 SHAPES = ("sphere", "box", "cylinder", "capsule", "torus")
 
 
@@ -84,11 +87,13 @@ def random_scene(index: int, seed: int = 0, width: int = 128) -> Scene:
     for i, slot in enumerate(rng.permutation(grid * grid)[:count]):
         mesh = primitive(SHAPES[rng.integers(len(SHAPES))], rng)
         mesh.apply_transform(trimesh.transformations.random_rotation_matrix(rng.random(3)))
-        mesh.apply_scale(cell * rng.uniform(0.45, 0.8) / max(mesh.extents))
-        vertices, faces = bump(mesh, rng, rng.uniform(0.0, 0.04) * cell)
+        size = min(cell * rng.uniform(0.45, 0.8), 0.8 * TOP)
+        mesh.apply_scale(size / max(mesh.extents))
+        vertices, faces = bump(mesh, rng, rng.uniform(0.0, 0.04) * size)
         centre = (np.array([slot % grid, slot // grid]) + 0.5) * cell - 0.8 * h
         centre += rng.uniform(-0.15, 0.15, 2) * cell
-        lift = LIFT + (rng.uniform(0.0, 0.5) * cell if rng.random() < 0.3 else 0.0)
+        room = TOP - LIFT - np.ptp(vertices[:, 1])  # how far it may float and stay below TOP
+        lift = LIFT + (min(rng.uniform(0.0, 0.5) * cell, room) if rng.random() < 0.3 else 0.0)
         vertices = vertices + [centre[0], lift - vertices[:, 1].min(), centre[1]]
         name = f"object{i}"
         if kinds[i] == 0:
@@ -101,8 +106,7 @@ def random_scene(index: int, seed: int = 0, width: int = 128) -> Scene:
         scene.add(name, name, (vertices, faces), closed=kinds[i] == 2)
 
     for j in range(int(rng.integers(2, 5))):
-        centre = (rng.uniform(-0.8, 0.8) * h, rng.uniform(0.55, 0.9) * HEIGHT,
-                  rng.uniform(-0.8, 0.8) * h)  # fmt: skip
+        centre = (rng.uniform(-0.8, 0.8) * h, rng.uniform(*LIGHTS), rng.uniform(-0.8, 0.8) * h)
         target = (rng.uniform(-h, h), 0.0, rng.uniform(-h, h))
         size = float(rng.uniform(0.1, 0.4))
         colour = rng.uniform(0.5, 1.0, 3)

@@ -17,7 +17,8 @@ from dpm.tracer import PhotonMap, VisiblePoints
 
 
 @cache
-def _load(path: Path) -> tuple[Weights, object]:
+def _load(path: Path, stamp: tuple[int, int]) -> tuple[Weights, object]:
+    """Weights and their jitted predictor, once per file version (stamp: mtime, size)."""
     weights = load_weights(path)
     return weights, make_predict(weights.model())
 
@@ -35,7 +36,11 @@ class DPM:
     def estimate(self, points: VisiblePoints, photons: PhotonMap) -> np.ndarray:
         """(N, 3) float32 caustic radiance leaving each visible point (0 where not hit)."""
         path = Path(self.weights) if self.weights is not None else shipped_weights(self.k)
-        weights, predict = _load(path.resolve())
+        try:
+            info = path.stat()
+        except OSError:
+            raise InputError(f"{path}: weight file not found") from None
+        weights, predict = _load(path.resolve(), (info.st_mtime_ns, info.st_size))
         if weights.k != self.k:
             raise InputError(f"{path}: the model was trained with K = {weights.k}, not {self.k}")
         check_k(self.k, photons)

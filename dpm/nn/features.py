@@ -18,6 +18,7 @@ import jax.numpy as jnp
 
 FLUX_A = 0.01  # a of t_a (Eq. 3)
 CHANNELS = 9  # position (3), direction (3), flux (3)
+MIN_RADIUS = 1e-12  # bandwidth floor (scene units): its square stays a normal float32
 
 
 def flux_map(u: jnp.ndarray, a: float = FLUX_A) -> jnp.ndarray:
@@ -66,7 +67,7 @@ def features(
     unit directions (K, 3), stored flux (K, 3, W ÷ N), the point's normal (3,), bandwidth r,
     N emitted paths and the tangent rotation angle."""
     frame = local_frame(normal, angle)
-    position = offset @ frame.T / jnp.maximum(radius, 1e-30)
+    position = offset @ frame.T / jnp.maximum(radius, MIN_RADIUS)
     return jnp.concatenate(
         [position, direction @ frame.T, flux_map(flux * n_paths)], axis=-1
     ).astype(jnp.float32)
@@ -78,4 +79,4 @@ def kernel_estimate(
     """(3,) radiance ρ/π · Σ wᵢ Φᵢ / (π r²) (Eq. 2) from kernel weights (K,), stored flux
     (K, 3), valid (K,) bool, albedo (3,) and bandwidth r (scene units)."""
     total = jnp.sum(jnp.where(valid[:, None], weight[:, None] * flux, 0.0), axis=0)
-    return albedo / jnp.pi * total / (jnp.pi * jnp.maximum(radius, 1e-30) ** 2)
+    return albedo / jnp.pi * total / (jnp.pi * jnp.maximum(radius, MIN_RADIUS) ** 2)

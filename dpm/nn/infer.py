@@ -18,7 +18,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from dpm.density.gather import nearest
-from dpm.nn.features import canonical_angle, features, kernel_estimate
+from dpm.nn.features import MIN_RADIUS, canonical_angle, features, kernel_estimate
 from dpm.nn.model import KernelNet
 from dpm.tracer import PhotonMap
 
@@ -49,7 +49,7 @@ def point_radiance(model: nn.Module, params: dict, b: Batch) -> jnp.ndarray:
         return kernel_estimate(out, b.flux, b.valid, b.albedo, b.radius)
     # direct regression: the mean photon power over the disc, back to radiance
     flux = b.valid.sum() * out / b.n_paths
-    return b.albedo / jnp.pi * flux / (jnp.pi * jnp.maximum(b.radius, 1e-30) ** 2)
+    return b.albedo / jnp.pi * flux / (jnp.pi * jnp.maximum(b.radius, MIN_RADIUS) ** 2)
 
 
 def make_predict(model: nn.Module) -> Callable[[dict, Batch], jnp.ndarray]:

@@ -66,7 +66,8 @@ class DirectNet(nn.Module):
         _, z = Extractor(self.width)(x, valid)
         for _ in range(2):
             z = nn.relu(nn.Dense(self.width)(z))
-        return flux_unmap(nn.Dense(3)(z))  # through the inverse of the input's flux map
+        # through the inverse of the input's flux map; the sigmoid keeps gradients alive
+        return flux_unmap(2.0 * jax.nn.sigmoid(nn.Dense(3)(z)) - 1.0)
 
 
 ARCHITECTURES = {"dpm": (KernelNet, 1), "dpm-l": (KernelNet, 4), "direct": (DirectNet, 1)}

@@ -32,6 +32,7 @@ from tqdm import tqdm
 
 from dpm.data.dataset import DataConfig, build, load_shard
 from dpm.errors import InputError
+from dpm.io import atomic
 from dpm.nn.infer import Batch, neighbourhoods, point_radiance
 from dpm.nn.model import ARCHITECTURES, make_model
 from dpm.nn.weights import Weights, save_weights
@@ -129,6 +130,14 @@ def load_config(path: str | Path) -> Config:
                          f"than the {d.scenes} scenes of [data]")  # fmt: skip
     if not d.budgets or min(d.budgets) < 1 or not t.learning_rate > 0:
         raise InputError(f"{path}: [data] budgets and [train] learning_rate must be positive")
+    for key in ("reference_paths", "reference_paths_per_pass", "workers"):
+        if getattr(d, key) < 1:
+            raise InputError(f"{path}: [data] {key} must be at least 1")
+    if not 0 < d.reference_radius < 1:
+        raise InputError(f"{path}: [data] reference_radius must be in (0, 1): a fraction of "
+                         "the scene's diagonal")  # fmt: skip
+    if t.batch < t.scenes_per_batch:
+        raise InputError(f"{path}: [train] batch must be at least scenes_per_batch")
     return config
 
 
@@ -171,6 +180,8 @@ class Sampler:
         counts = np.diff(np.linspace(0, size, parts + 1).astype(int))
         batches, targets = [], []
         for pick, count in zip(picks, counts, strict=True):
+            if count == 0:  # fewer points than parts
+                continue
             i, budget = self.choices[pick]
             shard = self._shard(i)
             rows = rng.integers(len(shard["position"]), size=count)
@@ -236,7 +247,8 @@ def _identity(config: Config) -> dict:
     t = asdict(config.train)
     for key in ("out", "steps", "validate_every", "checkpoint_seconds"):
         t.pop(key)
-    return {"data": config.data.identity(), "model": asdict(config.model), "train": t}
+    data = {**config.data.identity(), "scenes": config.data.scenes}  # fixes the split
+    return {"data": data, "model": asdict(config.model), "train": t}
 
 
 def _read_metrics(path: Path, upto: int) -> list[dict]:
@@ -267,12 +279,9 @@ def plot_losses(rows: list[dict], path: Path, title: str) -> None:
     plt.close(fig)
 
 
-def train(
-    config: Config, progress: bool = True, stop_after: int | None = None
-) -> tuple[dict, list[dict]]:
+def train(config: Config, progress: bool = True) -> tuple[dict, list[dict]]:
     """Build or complete the training set, then train (resuming from the run's checkpoints);
-    returns the final parameters and the metrics rows. `stop_after` (tests) interrupts after
-    that step as Ctrl-C would."""
+    returns the final parameters and the metrics rows."""
     manifest = build(config.data, progress=progress)
     n = len(manifest["shards"])
     t, m = config.train, config.model
@@ -285,9 +294,15 @@ def train(
     out.mkdir(parents=True, exist_ok=True)
     identity = _identity(config)
     stamp = out / "config.json"
-    if stamp.exists() and json.loads(stamp.read_text()) != identity:
-        raise InputError(f"{out}: holds a run with other settings; use another [train] out")
-    stamp.write_text(json.dumps(identity, indent=1))
+    if stamp.exists():
+        try:
+            same = json.loads(stamp.read_text()) == identity
+        except (json.JSONDecodeError, UnicodeDecodeError):
+            same = False
+        if not same:
+            raise InputError(f"{out}: holds a run with other settings; use another [train] out")
+    with atomic(stamp) as tmp:
+        tmp.write_text(json.dumps(identity, indent=1))
 
     model = make_model(m.architecture, m.width)
     optimiser, loss, step = make_steps(model, t.learning_rate)
@@ -305,14 +320,17 @@ def train(
         rows.append({"step": 0, "loss": "", "validation_loss": value, "seconds": "0.00"})
 
     def save(at: int) -> None:
-        if manager.latest_step() != at:
-            manager.save(at, args=ocp.args.StandardSave({"params": params, "opt_state": opt_state}))
-            manager.wait_until_finished()
-        with (out / "metrics.csv").open("w", newline="") as f:
+        # metrics first: a kill before the checkpoint leaves rows past it, which a resume
+        # drops, never a gap
+        with atomic(out / "metrics.csv") as tmp, tmp.open("w", newline="") as f:
             writer = csv.DictWriter(f, ["step", "loss", "validation_loss", "seconds"])
             writer.writeheader()
             writer.writerows(rows)
-        plot_losses(rows, out / "loss.png", f"{m.architecture}, K = {m.k}")
+        if manager.latest_step() != at:
+            manager.save(at, args=ocp.args.StandardSave({"params": params, "opt_state": opt_state}))
+            manager.wait_until_finished()
+        with atomic(out / "loss.png") as tmp:
+            plot_losses(rows, tmp, f"{m.architecture}, K = {m.k}")
 
     previous = signal.signal(signal.SIGTERM, _raise_interrupt)
     bar = tqdm(total=t.steps, initial=done, unit="step", desc="training", disable=not progress)
@@ -325,8 +343,9 @@ def train(
 
         ahead = draw(done + 1) if done < t.steps else None
         for s in range(done + 1, t.steps + 1):
-            params, opt_state, value = step(params, opt_state, *ahead)  # runs asynchronously,
-            ahead = draw(s + 1) if s < t.steps else None  # while the next batch is gathered
+            new = step(params, opt_state, *ahead)  # runs asynchronously while the next batch
+            ahead = draw(s + 1) if s < t.steps else None  # is gathered; an interrupt in
+            params, opt_state, value = new  # between keeps step s - 1 as the last one done
             done = s
             row = {"step": s, "loss": f"{float(value):.6g}", "validation_loss": "",
                    "seconds": f"{offset + time.perf_counter() - start:.2f}"}  # fmt: skip
@@ -338,8 +357,6 @@ def train(
             if time.perf_counter() - last_save > t.checkpoint_seconds:
                 save(s)
                 last_save = time.perf_counter()
-            if stop_after is not None and s >= stop_after:
-                raise KeyboardInterrupt
     except KeyboardInterrupt:
         save(done)
         raise

@@ -7,16 +7,18 @@ in `dpm/nn/weights/dpm-K.msgpack`.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import flax.linen as nn
+import jax
+import jax.numpy as jnp
 import numpy as np
-from flax import serialization
+from flax import serialization, traverse_util
 
 from dpm.errors import InputError
+from dpm.io import atomic
+from dpm.nn.features import CHANNELS
 from dpm.nn.model import ARCHITECTURES, make_model
 
 SHIPPED = Path(__file__).parent / "weights"
@@ -44,15 +46,8 @@ def save_weights(path: str | Path, weights: Weights) -> None:
         "params": serialization.to_state_dict(weights.params),
     })  # fmt: skip
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(blob)
-        os.chmod(tmp, 0o644)  # mkstemp makes it private
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic(path) as tmp:
+        tmp.write_bytes(blob)
 
 
 def load_weights(path: str | Path) -> Weights:
@@ -70,6 +65,17 @@ def load_weights(path: str | Path) -> Weights:
         raise InputError(f"{path}: not a dpm weight file ({type(e).__name__})") from None
     if weights.architecture not in ARCHITECTURES or weights.k < 1 or weights.width < 1:
         raise InputError(f"{path}: not a dpm weight file (bad architecture, width or k)")
+    expected = jax.eval_shape(
+        weights.model().init, jax.random.key(0), jnp.zeros((weights.k, CHANNELS)),
+        jnp.ones(weights.k, bool),
+    )  # fmt: skip
+
+    def shapes(tree: object) -> dict:
+        return {k: tuple(v.shape) for k, v in traverse_util.flatten_dict(tree).items()}
+
+    if shapes(weights.params) != shapes(expected):
+        raise InputError(f"{path}: parameters do not fit a {weights.architecture} network of "
+                         f"width {weights.width}")  # fmt: skip
     return weights
 
 
@@ -77,7 +83,7 @@ def shipped_weights(k: int) -> Path:
     """Path of the shipped DPM model for K = k; InputError naming the Ks there are."""
     path = SHIPPED / f"dpm-{k}.msgpack"
     if not path.exists():
-        ks = sorted(int(p.stem.split("-")[1]) for p in SHIPPED.glob("dpm-*.msgpack"))
+        ks = sorted(int(p.stem[4:]) for p in SHIPPED.glob("dpm-*.msgpack") if p.stem[4:].isdigit())
         have = ", ".join(map(str, ks)) if ks else "none yet"
         raise InputError(f"no shipped DPM model for --k {k} (shipped: {have}); train one with "
                          "dpm-train and pass --weights")  # fmt: skip
