@@ -10,8 +10,6 @@ run resumed from a checkpoint ends bit-identical to one that never stopped.
 from __future__ import annotations
 
 import hashlib
-import os
-import tempfile
 import time
 import zipfile
 from dataclasses import fields
@@ -24,6 +22,7 @@ from tqdm import tqdm
 from dpm.density.base import reflected
 from dpm.density.gather import PointIndex
 from dpm.errors import InputError
+from dpm.io import atomic
 from dpm.scene import Scene
 from dpm.tracer import BVH, PhotonMap, VisiblePoints, trace_photons
 
@@ -70,14 +69,8 @@ class Statistics:
 
 def _save(path: Path, key: str, arrays: dict[str, np.ndarray]) -> None:
     """Write a checkpoint atomically (temporary file, then rename): never half-written."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".npz")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, fingerprint=np.str_(key), **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic(path) as tmp, tmp.open("wb") as f:
+        np.savez(f, fingerprint=np.str_(key), **arrays)
 
 
 def _load(path: Path, key: str) -> dict[str, np.ndarray]:
