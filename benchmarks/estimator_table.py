@@ -29,7 +29,7 @@ import numpy as np
 from dpm import load_scene
 from dpm.density import PM, gather
 from dpm.density.reference import Reference, caustic_rmse, ppm_reference
-from dpm.density.tuning import best, radii, rescore, tune
+from dpm.density.tuning import best, radii, rescore, tune_widening
 from dpm.scene import Scene
 from dpm.tracer import BVH, VisiblePoints, build_bvh, trace_photons, trace_visible_points
 
@@ -98,7 +98,7 @@ def run_scene(name: str, reference_paths: int, max_reference_paths: int) -> dict
             row[f"pm{k}"] = {"gather_seconds": gather.seconds,
                              "estimate_seconds": total - gather.seconds}  # fmt: skip
         estimates: list[np.ndarray] = []
-        trials = tune(points, photons, ref.radiance, radii(diagonal), estimates=estimates)
+        trials = tune_widening(points, photons, ref.radiance, radii(diagonal), estimates)
         rows.append(row)
         kept.append((pm, trials, estimates))
         print(name, n, f"{len(photons):,} caustic photons", flush=True)

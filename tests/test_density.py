@@ -10,6 +10,7 @@ import pytest
 from dpm import load_scene
 from dpm.density import APPM, PM, PPM, SPPM, gather
 from dpm.density.progressive import run_passes
+from dpm.density.tuning import best, rescore, tune_widening
 from dpm.errors import InputError
 from dpm.metrics import rmse
 from dpm.tracer import PhotonMap, VisiblePoints, build_bvh, trace_photons, trace_visible_points
@@ -205,3 +206,18 @@ def test_k_larger_than_the_caustic_photons_is_refused(egg) -> None:
         PM(k=500).estimate(points, photons)
     none = photons.select(np.zeros(len(photons), bool))  # no caustic photons: black, no error
     assert not PM(k=500).estimate(points, none).any()
+
+
+def test_tuning_widens_the_radius_grid_until_the_best_is_inside() -> None:
+    points, photons = plane_points(8), plane_photons(20_000, 3)
+    exact = plane_density(points.position[:, 0], points.position[:, 1]) / np.pi
+    reference = exact[:, None].repeat(3, 1).astype(np.float32)
+    too_small = np.array([0.0025, 0.005, 0.01])  # far below the best radius for 20k photons
+    estimates: list[np.ndarray] = []
+    trials = tune_widening(points, photons, reference, too_small, estimates, max_steps=10)
+    for method in ("ppm", "appm"):
+        tried = sorted({t.radius for t in trials if t.method == method})
+        assert len(tried) > len(too_small)
+        assert tried[0] < best(trials, method).radius < tried[-1]
+    # the kept estimates line up with the trials: rescoring against the same reference is exact
+    assert rescore(trials, estimates, points, reference) == trials

@@ -55,7 +55,7 @@ def ppm_reference(
     estimator = PPM(radius=radius, photons_per_pass=photons_per_pass)
     if checkpoint_dir is not None:
         checkpoint_dir.mkdir(parents=True, exist_ok=True)
-    halves, photons = [], 0
+    halves, photons, paths = [], 0, 0
     for half in (1, 2):
         checkpoint = None if checkpoint_dir is None else checkpoint_dir / f"half{half}.npz"
         radiance, state = run_passes(
@@ -64,6 +64,10 @@ def ppm_reference(
         )  # fmt: skip
         halves.append(radiance)
         photons += state.photons
+        # a checkpoint from a longer run is used whole rather than cut back
+        asked = n_paths // 2
+        paths += max(asked, state.passes * photons_per_pass) if asked % photons_per_pass == 0 \
+            else asked  # fmt: skip
     a, b = halves
     mean = ((a.astype(np.float64) + b) / 2).astype(np.float32)
-    return Reference(mean, (a, b), caustic_rmse(points, a, b), 2 * (n_paths // 2), photons)
+    return Reference(mean, (a, b), caustic_rmse(points, a, b), paths, photons)

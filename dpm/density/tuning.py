@@ -67,6 +67,37 @@ def tune(
     return trials
 
 
+def tune_widening(
+    points: VisiblePoints,
+    photons: PhotonMap,
+    reference: np.ndarray,
+    radii: np.ndarray,
+    estimates: list[np.ndarray] | None = None,
+    max_steps: int = 4,
+) -> list[Trial]:
+    """`tune`, then extend each method's radius grid by its log step while the best is at an edge.
+
+    A best setting at the edge of the grid only bounds the true optimum, which would flatter
+    any method compared against "the best"; up to `max_steps` radii are added per method.
+    """
+    trials = tune(points, photons, reference, radii, estimates=estimates)
+    ratio = float(radii[1] / radii[0])
+    for method in ("ppm", "appm"):
+        for _ in range(max_steps):
+            tried = sorted({t.radius for t in trials if t.method == method})
+            radius = best(trials, method).radius
+            if radius == tried[-1]:
+                extra = tried[-1] * ratio
+            elif radius == tried[0]:
+                extra = tried[0] / ratio
+            else:
+                break
+            extra_radii = np.array([extra])
+            trials += tune(points, photons, reference, extra_radii, methods=(method,),
+                           estimates=estimates)  # fmt: skip
+    return trials
+
+
 def rescore(
     trials: list[Trial], estimates: list[np.ndarray], points: VisiblePoints, reference: np.ndarray
 ) -> list[Trial]:
