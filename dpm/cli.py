@@ -14,7 +14,7 @@ from pathlib import Path
 
 from dpm.errors import InputError
 from dpm.io import write_image, write_json
-from dpm.render import COMPONENTS, IMPLEMENTED, PLANNED, RenderOptions, render
+from dpm.render import COMPONENTS, METHODS, RenderOptions, render
 from dpm.scene import load_scene
 
 
@@ -53,7 +53,7 @@ def _render_parser() -> _Parser:
     )
     p.add_argument("scene", type=Path, help="scene .obj file")
     p.add_argument("-o", "--output", type=Path, help="image to write: .exr (linear) or .png")
-    p.add_argument("--method", choices=IMPLEMENTED + PLANNED, help="rendering method")
+    p.add_argument("--method", choices=METHODS, help="rendering method")
     p.add_argument("--spp", type=int, help="samples per pixel")
     p.add_argument("--photons", type=int, help="emitted photon paths (photon methods)")
     p.add_argument("--k", type=int, help="nearest photons per estimate (pm, dpm)")
@@ -69,7 +69,11 @@ def _render_parser() -> _Parser:
     )  # fmt: skip
     p.add_argument(
         "--weights", type=Path, metavar="FILE.msgpack",
-        help="dpm: weights from dpm-train (default: the shipped model for --k)",
+        help="dpm, hybrid: weights from dpm-train (default: the shipped model for --k)",
+    )  # fmt: skip
+    p.add_argument(
+        "--denoise", action=argparse.BooleanOptionalAction,
+        help="Open Image Denoise with albedo and normal images (default: on for hybrid only)",
     )  # fmt: skip
     p.add_argument("--seed", type=int, help="random seed (same seed, same image)")
     p.add_argument("--width", type=int, help="image width in pixels (overrides the scene)")
@@ -78,6 +82,28 @@ def _render_parser() -> _Parser:
     p.add_argument("--stats", type=Path, metavar="FILE.json", help="write timings and counts")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     return p
+
+
+STAGES = {  # the summary's stages: name -> the render's timing keys
+    "load": ("load", "bvh"),
+    "trace": ("photons",),
+    "gather": ("gather",),
+    "estimate": ("estimate",),
+    "network": ("network",),
+    "path tracing": ("visible_points", "shade"),
+    "denoise": ("denoise",),
+    "write": ("write",),
+}
+
+
+def timing_summary(seconds: dict[str, float]) -> str:
+    """One line of seconds per stage (trace, gather, network, path tracing, denoise, ...)."""
+    parts = [
+        f"{name} {sum(seconds[k] for k in keys if k in seconds):.2f}s"
+        for name, keys in STAGES.items()
+        if any(k in seconds for k in keys)
+    ]
+    return ", ".join(parts + [f"total {sum(seconds.values()):.2f}s"])
 
 
 def render_main(argv: Sequence[str] | None = None) -> int:
@@ -98,7 +124,7 @@ def render_main(argv: Sequence[str] | None = None) -> int:
         for key, value in scene.render_defaults.items():
             if hasattr(options, key):
                 setattr(options, key, value)
-        keys = ("method", "spp", "photons", "k", "seed", "width", "height", "component")
+        keys = ("method", "spp", "photons", "k", "seed", "width", "height", "component", "denoise")
         for key in keys + ("radius", "photons_per_pass", "checkpoint", "weights"):
             if getattr(args, key) is not None:
                 setattr(options, key, getattr(args, key))
@@ -113,9 +139,8 @@ def render_main(argv: Sequence[str] | None = None) -> int:
         if args.stats is not None:
             write_json(args.stats, result.stats)
         if not args.quiet:
-            s = result.stats["seconds"]
-            timing = ", ".join(f"{k} {v:.2f}s" for k, v in s.items())
-            print(f"wrote {output} ({result.stats['width']}x{result.stats['height']}): {timing}")
+            print(f"wrote {output} ({result.stats['width']}x{result.stats['height']}): "
+                  + timing_summary(result.stats["seconds"]))  # fmt: skip
 
     return _run("dpm-render", body)
 

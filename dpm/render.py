@@ -3,7 +3,8 @@
 Every method starts from the same visible points (first diffuse hits of the camera samples);
 `dpm-render --method NAME` and the benchmarks call `render`. The photon methods estimate the
 caustic radiance at the visible points (`--component caustic` writes it as the camera sees
-it) and, for the full image, add the path tracer without caustics (`pt-nocaustic`).
+it) and, for the full image, add the path tracer without caustics (`pt-nocaustic`). The
+hybrid (paper §5) is `dpm` followed by Open Image Denoise; any method can be denoised.
 """
 
 from __future__ import annotations
@@ -16,18 +17,26 @@ import numpy as np
 from tqdm import tqdm
 
 from dpm.camera import Camera
-from dpm.density import APPM, PM, PPM, SPPM, Estimator
+from dpm.density import APPM, PM, PPM, SPPM, Estimator, gather
 from dpm.density.pm import check_k
 from dpm.density.progressive import run_passes
 from dpm.errors import InputError
 from dpm.scene import Scene
-from dpm.tracer import BVH, build_bvh, intersect, shade, trace_photons, trace_visible_points
+from dpm.tracer import (
+    BVH,
+    VisiblePoints,
+    build_bvh,
+    intersect,
+    shade,
+    trace_photons,
+    trace_visible_points,
+)
 
 PATH_TRACERS = ("pt", "pt-nocaustic")
-PHOTON_METHODS = ("pm", "ppm", "sppm", "appm", "dpm")
-NEAREST_METHODS = ("pm", "dpm")  # one photon map, K nearest photons per visible point
-IMPLEMENTED = PATH_TRACERS + PHOTON_METHODS
-PLANNED = ("hybrid",)
+PHOTON_METHODS = ("pm", "ppm", "sppm", "appm", "dpm", "hybrid")
+NEAREST_METHODS = ("pm", "dpm", "hybrid")  # one photon map, K nearest photons per visible point
+LEARNED_METHODS = ("dpm", "hybrid")
+METHODS = PATH_TRACERS + PHOTON_METHODS
 COMPONENTS = ("full", "caustic")
 SAMPLES_PER_STEP = 1 << 16  # pixel samples traced between progress-bar updates
 RADIUS_FRACTION = 1e-3  # default initial radius, as a fraction of the scene's bounding diagonal
@@ -50,7 +59,13 @@ class RenderOptions:
     photons_per_pass: int | None = None  # None: photons / PASSES
     checkpoint: Path | None = None  # ppm/appm: statistics file to resume from and save to
     weights: Path | None = None  # dpm: weight file from dpm-train; None: the shipped model for k
+    denoise: bool | None = None  # OIDN with albedo and normal images; None: for hybrid only
     progress: bool = True
+
+    @property
+    def denoised(self) -> bool:
+        """Whether the image goes through the denoiser."""
+        return self.method == "hybrid" if self.denoise is None else self.denoise
 
 
 @dataclass
@@ -63,9 +78,7 @@ class RenderResult:
 
 def validate(options: RenderOptions) -> None:
     """Raise InputError for options no method can use."""
-    if options.method not in IMPLEMENTED:
-        if options.method in PLANNED:
-            raise InputError(f"method '{options.method}' is not implemented yet; use 'pt'")
+    if options.method not in METHODS:
         raise InputError(f"unknown method '{options.method}'")
     if options.component not in COMPONENTS:
         raise InputError(f"unknown component '{options.component}'; use full or caustic")
@@ -79,8 +92,10 @@ def validate(options: RenderOptions) -> None:
         raise InputError("--photons-per-pass must be at least 1")
     if options.checkpoint is not None and options.method not in ("ppm", "appm"):
         raise InputError("--checkpoint applies to the progressive methods ppm and appm only")
-    if options.weights is not None and options.method != "dpm":
-        raise InputError("--weights applies to --method dpm only")
+    if options.weights is not None and options.method not in LEARNED_METHODS:
+        raise InputError("--weights applies to --method dpm and hybrid only")
+    if options.method == "sppm" and options.component == "caustic" and options.denoised:
+        raise InputError("sppm's caustic component has no albedo and normal images to denoise with")
     for name in ("spp", "k"):
         if getattr(options, name) < 1:
             raise InputError(f"--{name} must be at least 1")
@@ -131,7 +146,7 @@ def _photon_estimator(scene: Scene, options: RenderOptions) -> Estimator | SPPM:
     """The density estimator of a photon method, with defaults filled in."""
     if options.method == "pm":
         return PM(options.k)
-    if options.method == "dpm":
+    if options.method in LEARNED_METHODS:
         from dpm.nn.estimator import DPM  # imports JAX: only when asked for
 
         return DPM(options.k, options.weights)
@@ -139,6 +154,20 @@ def _photon_estimator(scene: Scene, options: RenderOptions) -> Estimator | SPPM:
     per_pass = options.photons_per_pass or max(1, options.photons // PASSES)
     cls = {"ppm": PPM, "appm": APPM, "sppm": SPPM}[options.method]
     return cls(radius=radius, photons_per_pass=per_pass)
+
+
+def guides(points: VisiblePoints) -> tuple[np.ndarray, np.ndarray]:
+    """The denoiser's per-sample guides: (N, 3) albedo in [0, 1] and (N, 3) unit normal.
+
+    Albedo is the first diffuse surface's reflectance tinted by the mirrors and glass on the
+    way (OIDN's convention for delta surfaces); a light seen directly gets its normalised
+    colour, and a miss zero albedo and normal.
+    """
+    albedo = np.clip(points.albedo * points.throughput, 0.0, 1.0)
+    peak = points.emitted.max(axis=1, keepdims=True)
+    light = ~points.hit & (peak[:, 0] > 0)
+    albedo[light] = points.emitted[light] / peak[light]
+    return albedo, points.normal
 
 
 def render(scene: Scene, options: RenderOptions | None = None) -> RenderResult:
@@ -164,6 +193,9 @@ def render(scene: Scene, options: RenderOptions | None = None) -> RenderResult:
         check_k(options.k, photons)
         stats["caustic_photons"] = len(photons)
     image = np.zeros((h, w, 3), np.float32)
+    denoised = options.denoised
+    if denoised:  # the denoiser's guides: first diffuse surface's albedo and normal per pixel
+        albedo, normal = np.zeros_like(image), np.zeros_like(image)
     if isinstance(estimator, SPPM):
         start = time.perf_counter()
         caustic, stats["caustic_photons"] = estimator.render(
@@ -178,7 +210,7 @@ def render(scene: Scene, options: RenderOptions | None = None) -> RenderResult:
     if full:
         seconds["shade"] = 0.0
     hits = dropped = 0
-    blocks = full or method in ("pm", "ppm", "appm", "dpm")
+    blocks = full or method in ("pm", "ppm", "appm", "dpm", "hybrid")
     show = options.progress and rows_per_step < h
     with tqdm(total=h, unit="row", disable=not show, desc=method) as bar:
         for row0 in range(0, h if blocks else 0, rows_per_step):
@@ -194,22 +226,37 @@ def render(scene: Scene, options: RenderOptions | None = None) -> RenderResult:
                 radiance += points.emitted + points.throughput * reflected
                 seconds["shade"] += time.perf_counter() - start
                 dropped += bad
-            if method in ("pm", "ppm", "appm", "dpm"):
+            if method in ("pm", "ppm", "appm", "dpm", "hybrid"):
                 start = time.perf_counter()
                 if photons is not None:
+                    gathered = gather.seconds
                     caustic = estimator.estimate(points, photons)
+                    seconds["gather"] = seconds.get("gather", 0.0) + gather.seconds - gathered
+                    start += gather.seconds - gathered  # "estimate": the rest, kernel or network
                 else:
                     caustic, state = run_passes(
                         estimator, scene, bvh, points, options.photons, options.seed,
                         checkpoint=options.checkpoint, progress=options.progress,
                     )  # fmt: skip
                     stats["caustic_photons"] = state.photons
-                seconds["estimate"] = seconds.get("estimate", 0.0) + time.perf_counter() - start
+                stage = "network" if method in LEARNED_METHODS else "estimate"
+                seconds[stage] = seconds.get(stage, 0.0) + time.perf_counter() - start
                 radiance += points.throughput * caustic
             image[row0:row1] += radiance.reshape(row1 - row0, w, spp, 3).mean(axis=2)
+            if denoised:
+                a, n = guides(points)
+                albedo[row0:row1] = a.reshape(row1 - row0, w, spp, 3).mean(axis=2)
+                normal[row0:row1] = n.reshape(row1 - row0, w, spp, 3).mean(axis=2)
             hits += int(points.hit.sum())
             bar.update(row1 - row0)
+    if denoised:
+        from dpm.denoise import denoise
+
+        start = time.perf_counter()
+        image = denoise(image, albedo, normal)
+        seconds["denoise"] = time.perf_counter() - start
     stats.update(
+        denoised=denoised,
         width=w,
         height=h,
         spp=spp,

@@ -115,7 +115,7 @@ def test_bad_scene_gives_one_line_and_exit_2(case: str, tmp_path: Path, capsys) 
         (["--spp", "-3"], "--spp"),
         (["--seed", "-1"], "--seed"),
         (["--width", "0"], "--width"),
-        (["--method", "hybrid"], "not implemented yet"),
+        (["--method", "sppm", "--component", "caustic", "--denoise"], "denoise"),
         (["--method", "pm", "--weights", "w.msgpack"], "--weights"),
         (["--method", "ppm", "--radius", "0"], "--radius"),
         (["--method", "appm", "--radius", "-0.1"], "--radius"),

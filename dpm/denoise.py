@@ -1,0 +1,29 @@
+"""Intel Open Image Denoise (CPU) on a rendered image, guided by its albedo and normal images.
+
+OIDN's output does not depend on its thread count (checked in tests), so a denoised render
+keeps the "same seed, same image" promise.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dpm.errors import InputError
+
+
+def denoise(color: np.ndarray, albedo: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """(H, W, 3) float32 linear RGB after OIDN's RT filter (HDR, high quality).
+
+    color: (H, W, 3) linear RGB radiance; albedo: (H, W, 3) in [0, 1], the reflectance of
+    the first diffuse surface each pixel sees; normal: (H, W, 3) world-space normals there
+    (zero where the pixel sees no surface).
+    """
+    try:
+        import pyoidn
+    except ImportError:
+        raise InputError(
+            "denoising needs pyoidn (pip install pyoidn); or pass --no-denoise"
+        ) from None
+    images = [np.ascontiguousarray(np.nan_to_num(a), np.float32) for a in (color, albedo, normal)]
+    images[0] = np.maximum(images[0], 0.0)  # HDR input must be non-negative
+    return pyoidn.denoise(*images, hdr=True, quality="high")
