@@ -1,0 +1,205 @@
+"""Equal-time comparison (paper §5): the hybrid, dpm `pt` + OIDN and Mitsuba 3 `path` + OIDN,
+scored against a long reference, on the glass egg and the ring.
+
+    python benchmarks/hybrid.py [SCENE ...] [--width W] [--k K] [--weights FILE]
+
+The hybrid renders first with its defaults (`dpm-render --method hybrid`); its wall time
+(after a warm-up render that compiles everything) is the budget the other two get: each is
+timed at a few samples per pixel and then given the sample count that fills the budget. All
+three are denoised by the same OIDN call with their own albedo and normal images.
+
+Reference: dpm `pt-nocaustic` at REF_SPP plus the PPM caustic reference (guided emission, two
+halves) at the visible points of REF_CAUSTIC_SPP samples per pixel, averaged per pixel. It is
+checked against Mitsuba 3 at MITSUBA_CHECK_SPP (RMSE and mean ratio in the report). The
+reference image is cached in benchmarks/results/hybrid/SCENE-reference.exr.
+
+Writes benchmarks/results/hybrid.md and benchmarks/results/hybrid/SCENE.png (the three images
+and the reference side by side).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import imageio.v3 as iio
+import numpy as np
+
+from dpm import load_scene
+from dpm.camera import Camera
+from dpm.denoise import denoise
+from dpm.density.reference import ppm_reference
+from dpm.io import linear_to_srgb8, read_exr, write_image
+from dpm.metrics import rmse
+from dpm.render import RenderOptions, render
+from dpm.scene import Scene
+from dpm.tracer import build_bvh, trace_visible_points
+
+HERE = Path(__file__).parent
+sys.path.insert(0, str(HERE.parent / "tests"))
+from mitsuba_scene import mitsuba_scene  # noqa: E402  (the test suite's converter)
+
+SCENES = HERE.parent / "examples" / "scenes"
+OUT = HERE / "results" / "hybrid"
+REF_SPP = 4096  # pt-nocaustic samples per pixel of the reference
+REF_CAUSTIC_SPP = 16  # visible points per pixel of the caustic reference
+REF_CAUSTIC_PATHS = 200_000_000  # guided photon paths of the caustic reference
+MITSUBA_CHECK_SPP = 4096
+CALIBRATION_SPP = 4
+
+
+def caustic_reference(scene: Scene, camera: Camera, name: str) -> tuple[np.ndarray, float]:
+    """(H, W, 3) caustic radiance the camera sees, per pixel, and the PPM halves' noise."""
+    bvh = build_bvh(scene)
+    points = trace_visible_points(scene, bvh, camera, REF_CAUSTIC_SPP, 1001, (0, camera.height))
+    lo, hi = scene.bounds
+    radius = 5e-4 * float(np.linalg.norm(np.subtract(hi, lo, dtype=np.float64)))
+    ref = ppm_reference(
+        scene, bvh, points, REF_CAUSTIC_PATHS, radius, 1_000_000, seed=7,
+        checkpoint_dir=OUT / f"{name}-caustic", progress=True,
+    )  # fmt: skip
+    seen = points.throughput * ref.radiance
+    image = seen.reshape(camera.height, camera.width, REF_CAUSTIC_SPP, 3).mean(axis=2)
+    return image.astype(np.float32), ref.noise
+
+
+def reference(scene: Scene, camera: Camera, name: str) -> np.ndarray:
+    """The long reference image (H, W, 3), cached as an EXR."""
+    path = OUT / f"{name}-reference.exr"
+    if path.exists():
+        return read_exr(path)
+    size = {"width": camera.width, "height": camera.height}
+    nocaustic = render(
+        scene, RenderOptions(method="pt-nocaustic", spp=REF_SPP, seed=1000, **size)
+    ).image
+    caustic, noise = caustic_reference(scene, camera, name)
+    print(name, f"caustic reference noise {noise:.5f}", flush=True)
+    image = nocaustic + caustic
+    write_image(path, image)
+    return image
+
+
+def mitsuba(scene: Scene, camera: Camera, spp: int, seed: int) -> tuple[np.ndarray, ...]:
+    """Mitsuba 3 `path` with albedo and shading-normal AOVs: three (H, W, 3) images."""
+    import mitsuba as mi
+
+    with tempfile.TemporaryDirectory() as folder:
+        desc = mitsuba_scene(scene, camera, spp, Path(folder))
+        desc["integrator"] = {
+            "type": "aov", "aovs": "albedo:albedo,nn:sh_normal",
+            "integrator": {"type": "path", "max_depth": -1},
+        }  # fmt: skip
+        loaded = mi.load_dict(desc)
+    out = np.array(mi.render(loaded, spp=spp, seed=seed), dtype=np.float32)
+    return out[..., :3], np.clip(out[..., 3:6], 0, 1), out[..., 6:9]
+
+
+def timed(fn) -> tuple[object, float]:
+    """fn()'s result and its wall seconds."""
+    start = time.perf_counter()
+    result = fn()
+    return result, time.perf_counter() - start
+
+
+def equal_time_spp(fn, budget: float) -> int:
+    """Samples per pixel that make fn(spp) take about `budget` seconds.
+
+    After a warm-up, the time is fitted as fixed + per-sample cost from two sample counts.
+    """
+    fn(1)
+    lo, hi = CALIBRATION_SPP, 4 * CALIBRATION_SPP
+    t_lo, t_hi = (timed(lambda n=n: fn(n))[1] for n in (lo, hi))
+    per_spp = max((t_hi - t_lo) / (hi - lo), 1e-9)
+    return max(1, int((budget - (t_lo - per_spp * lo)) / per_spp))
+
+
+def run_scene(name: str, width: int, k: int, weights: Path | None) -> dict:
+    """Render one scene the three ways at equal time; returns errors, times and images."""
+    scene = load_scene(SCENES / f"{name}.obj")
+    height = width * scene.camera.height // scene.camera.width
+    camera = scene.camera.with_resolution(width, height)
+    size = {"width": width, "height": height, "progress": False}
+    ref = reference(scene, camera, name)
+
+    hybrid = RenderOptions(method="hybrid", k=k, weights=weights, **size)
+    render(
+        scene,
+        RenderOptions(method="hybrid", k=k, weights=weights, width=16, height=16, progress=False),
+    )  # fmt: skip  (warm-up: compile)
+    result, budget = timed(lambda: render(scene, hybrid))
+    rows = {"hybrid": (result.image, budget, hybrid.spp)}
+
+    def pt(spp: int) -> np.ndarray:
+        return render(scene, RenderOptions(method="pt", spp=spp, denoise=True, **size)).image
+
+    spp = equal_time_spp(pt, budget)
+    image, seconds = timed(lambda: pt(spp))
+    rows["dpm pt + OIDN"] = (image, seconds, spp)
+
+    def mi(spp: int) -> np.ndarray:
+        return denoise(*mitsuba(scene, camera, spp, seed=0))
+
+    spp = equal_time_spp(mi, budget)
+    image, seconds = timed(lambda: mi(spp))
+    rows["Mitsuba 3 path + OIDN"] = (image, seconds, spp)
+
+    check = mitsuba(scene, camera, MITSUBA_CHECK_SPP, seed=1)[0]
+    return {
+        "scene": name, "reference": ref, "rows": rows,
+        "mitsuba_check": (rmse(check, ref), float(check.mean() / ref.mean())),
+    }  # fmt: skip
+
+
+def write_report(records: list[dict], k: int, weights: Path | None) -> None:
+    """Side-by-side PNGs and benchmarks/results/hybrid.md."""
+    lines = [
+        "# Hybrid vs path tracing + OIDN at equal time",
+        "",
+        f"Made by `python benchmarks/hybrid.py` (K = {k}, weights: "
+        f"{weights or 'shipped'}); {platform.machine()}, {os.cpu_count()} cores, "
+        f"{datetime.date.today().isoformat()}. Seconds are wall time of the whole render",
+        "(photons, gathering, network, path tracing, denoising), compilation excluded.",
+        "",
+        "| scene | method | spp | seconds | RMSE | reference vs Mitsuba 3 (RMSE, mean ratio) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in records:
+        e, ratio = r["mitsuba_check"]
+        tiles = []
+        for method, (image, seconds, spp) in r["rows"].items():
+            error = rmse(image, r["reference"])
+            lines.append(
+                f"| {r['scene']} | {method} | {spp} | {seconds:.2f} | {error:.4f} "
+                f"| {e:.4f}, {ratio:.3f} |"
+            )
+            tiles.append(image)
+        tiles.append(r["reference"])
+        gap = np.ones((r["reference"].shape[0], 4, 3), np.float32)
+        row = np.concatenate([x for t in tiles for x in (t, gap)][:-1], axis=1)
+        iio.imwrite(OUT / f"{r['scene']}.png", linear_to_srgb8(row))
+        lines += ["", f"![{r['scene']}: " + ", ".join(r["rows"]) + ", reference]"
+                  f"(hybrid/{r['scene']}.png)", ""]  # fmt: skip
+    (HERE / "results" / "hybrid.md").write_text("\n".join(lines) + "\n")
+
+
+def main() -> None:
+    """Run the comparison on the scenes named (default: glass_egg and ring)."""
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("scenes", nargs="*", default=["glass_egg", "ring"])
+    p.add_argument("--width", type=int, default=256)
+    p.add_argument("--k", type=int, default=50)
+    p.add_argument("--weights", type=Path, help="default: the shipped model for --k")
+    args = p.parse_args()
+    OUT.mkdir(parents=True, exist_ok=True)
+    records = [run_scene(name, args.width, args.k, args.weights) for name in args.scenes]
+    write_report(records, args.k, args.weights)
+
+
+if __name__ == "__main__":
+    main()
