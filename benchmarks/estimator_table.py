@@ -2,7 +2,8 @@
 100·M emitted photon paths on the example scenes, against a PPM reference, with seconds per
 stage. M = 700,000 gives the glass egg about 15k caustic photons, as in the paper.
 
-    python benchmarks/estimator_table.py [SCENE ...] [--reference-paths N] [--max-reference-paths N]
+    python benchmarks/estimator_table.py [SCENE ...] [--reference-paths N]
+        [--max-reference-paths N] [--reference-radius F]
 
 Each scene writes benchmarks/results/estimators/SCENE.json and its reference radiance
 benchmarks/results/references_radiance/SCENE.npz (read by dpm_table.py); the Markdown table
@@ -10,7 +11,14 @@ benchmarks/results/estimators.md is rebuilt from every JSON there. References ch
 benchmarks/results/references/ (not committed): an interrupted run resumes, and a larger
 budget continues the same reference. A reference starts at --reference-paths and grows
 (up to --max-reference-paths) until its noise is at most a fifth of the scene's least error;
-the estimators' outputs are kept and rescored, not rerun.
+the estimators' outputs are kept and rescored, not rerun, and saved beside the reference
+checkpoint, so a rerun (say with a longer reference) skips them; delete that folder after
+changing an estimator.
+
+--reference-radius sets the reference's initial PPM radius (× scene diagonal). PPM's radius
+stays proportional to it, so the noise falls as 1/radius (worth radius^(1/0.35) times the
+paths) and the bias grows as radius²; scenes whose caustics spread wide (the pools) need the
+larger radius to meet the ⅕ rule at all, and the table lists each scene's.
 """
 
 from __future__ import annotations
@@ -29,7 +37,8 @@ import numpy as np
 from dpm import load_scene
 from dpm.density import PM, gather
 from dpm.density.reference import Reference, caustic_rmse, ppm_reference
-from dpm.density.tuning import best, radii, rescore, tune_widening
+from dpm.density.tuning import Trial, best, radii, rescore, tune_widening
+from dpm.io import atomic
 from dpm.scene import Scene
 from dpm.tracer import BVH, VisiblePoints, build_bvh, trace_photons, trace_visible_points
 
@@ -38,7 +47,7 @@ SCENES = HERE.parent / "examples" / "scenes"
 RESULTS = HERE / "results"
 M = 700_000
 WIDTH = 128  # visible points: one per pixel of a WIDTH-wide image, seed 0
-REFERENCE_RADIUS = 5e-4  # × scene diagonal
+REFERENCE_RADIUS = 5e-4  # × scene diagonal, default
 REFERENCE_PATHS_PER_PASS = 1_000_000  # guided paths
 NOISE_EXPONENT = 0.32  # reference noise ∝ paths^-0.32 (glass egg, 20M to 600M paths)
 
@@ -62,7 +71,48 @@ def load_reference(name: str) -> tuple[np.ndarray, float]:
         return f["radiance"], float(f["noise"])
 
 
-def run_scene(name: str, reference_paths: int, max_reference_paths: int) -> dict:
+def run_budget(
+    name: str,
+    n: int,
+    scene: Scene,
+    bvh: BVH,
+    points: VisiblePoints,
+    reference: np.ndarray,
+    diagonal: float,
+) -> tuple[dict, dict, list, list]:
+    """One budget's PM estimates and tuning trials, or their saved copy: (row, pm, trials,
+    estimates); the RMSEs in them are against `reference` and are rescored later."""
+    saved = RESULTS / "references" / name / f"estimates-{n}.npz"
+    if saved.exists():
+        with np.load(saved) as f:
+            row = json.loads(str(f["row"]))
+            trials = [Trial(**t) for t in json.loads(str(f["trials"]))]
+            pm = {k: (f[f"pm{k}"] if f"pm{k}" in f else None) for k in (50, 500)}
+            return row, pm, trials, list(f["estimates"])
+    start = time.perf_counter()
+    photons = trace_photons(scene, bvh, n, seed=0, caustic_only=True)
+    row = {"paths": n, "caustic_photons": len(photons), "trace_seconds": 0.0}
+    row["trace_seconds"] = time.perf_counter() - start
+    pm = {}
+    for k in (50, 500):
+        gather.seconds = 0.0
+        start = time.perf_counter()
+        pm[k] = PM(k=k).estimate(points, photons) if len(photons) >= k else None
+        total = time.perf_counter() - start
+        row[f"pm{k}"] = {"gather_seconds": gather.seconds,
+                         "estimate_seconds": total - gather.seconds}  # fmt: skip
+    estimates: list[np.ndarray] = []
+    trials = tune_widening(points, photons, reference, radii(diagonal), estimates)
+    arrays = {f"pm{k}": e for k, e in pm.items() if e is not None}
+    with atomic(saved) as tmp, open(tmp, "wb") as f:
+        np.savez(f, row=json.dumps(row), trials=json.dumps([asdict(t) for t in trials]),
+                 estimates=np.stack(estimates), **arrays)  # fmt: skip
+    return row, pm, trials, estimates
+
+
+def run_scene(
+    name: str, reference_paths: int, max_reference_paths: int, reference_radius: float
+) -> dict:
     """Measure one scene, growing its reference until the ⅕ rule holds; returns the JSON record."""
     scene = load_scene(SCENES / f"{name}.obj")
     bvh = build_bvh(scene)
@@ -75,7 +125,7 @@ def run_scene(name: str, reference_paths: int, max_reference_paths: int) -> dict
         nonlocal reference_seconds
         start = time.perf_counter()
         ref = ppm_reference(
-            scene, bvh, points, paths, REFERENCE_RADIUS * diagonal, REFERENCE_PATHS_PER_PASS,
+            scene, bvh, points, paths, reference_radius * diagonal, REFERENCE_PATHS_PER_PASS,
             seed=1, checkpoint_dir=RESULTS / "references" / name, progress=True,
         )  # fmt: skip
         reference_seconds += time.perf_counter() - start
@@ -85,23 +135,10 @@ def run_scene(name: str, reference_paths: int, max_reference_paths: int) -> dict
     ref = reference(reference_paths)
     rows, kept = [], []  # kept: per budget, the PM estimates and every trial's estimate
     for n in (M, 10 * M, 100 * M):
-        start = time.perf_counter()
-        photons = trace_photons(scene, bvh, n, seed=0, caustic_only=True)
-        row = {"paths": n, "caustic_photons": len(photons), "trace_seconds": 0.0}
-        row["trace_seconds"] = time.perf_counter() - start
-        pm = {}
-        for k in (50, 500):
-            gather.seconds = 0.0
-            start = time.perf_counter()
-            pm[k] = PM(k=k).estimate(points, photons) if len(photons) >= k else None
-            total = time.perf_counter() - start
-            row[f"pm{k}"] = {"gather_seconds": gather.seconds,
-                             "estimate_seconds": total - gather.seconds}  # fmt: skip
-        estimates: list[np.ndarray] = []
-        trials = tune_widening(points, photons, ref.radiance, radii(diagonal), estimates)
+        row, pm, trials, estimates = run_budget(name, n, scene, bvh, points, ref.radiance, diagonal)
         rows.append(row)
         kept.append((pm, trials, estimates))
-        print(name, n, f"{len(photons):,} caustic photons", flush=True)
+        print(name, n, f"{row['caustic_photons']:,} caustic photons", flush=True)
 
     while True:  # score against the reference; lengthen it while its noise is above ⅕ of the least
         for row, (pm, trials, estimates) in zip(rows, kept, strict=True):
@@ -128,7 +165,7 @@ def run_scene(name: str, reference_paths: int, max_reference_paths: int) -> dict
         "height": camera.height, "diagonal": diagonal,
         "reference": {
             "paths": ref.n_paths, "caustic_photons": ref.caustic_photons, "noise": ref.noise,
-            "radius": REFERENCE_RADIUS * diagonal, "paths_per_pass": REFERENCE_PATHS_PER_PASS,
+            "radius": reference_radius * diagonal, "paths_per_pass": REFERENCE_PATHS_PER_PASS,
             "seconds_this_run": reference_seconds,
         },
         "budgets": rows,
@@ -162,8 +199,8 @@ def write_markdown() -> None:
         "photons per pass), chosen per scene and budget.",
         "",
         "| scene | paths | caustic photons | PM-50 | PM-500 | PPM-best | APPM-best "
-        "| ref noise | noise ≤ ⅕ min |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| ref noise | noise ≤ ⅕ min | ref r₀ (× diagonal) |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in records:
         smallest = min(least_error(b) for b in r["budgets"])
@@ -173,7 +210,8 @@ def write_markdown() -> None:
                 f"| {r['scene']} | {b['paths']:,} | {b['caustic_photons']:,} "
                 f"| {fmt(b['pm50']['rmse'])} | {fmt(b['pm500']['rmse'])} "
                 f"| {fmt(b['ppm_best']['rmse'])} | {fmt(b['appm_best']['rmse'])} "
-                f"| {noise:.4f} | {'yes' if noise <= smallest / 5 else 'no'} |"
+                f"| {noise:.4f} | {'yes' if noise <= smallest / 5 else 'no'} "
+                f"| {r['reference']['radius'] / r['diagonal']:.1e} |"
             )
     lines += [
         "",
@@ -216,10 +254,13 @@ def main() -> None:
         "glass_egg", "ring", "red_wine", "pool1", "pool2", "torus", "dragon"])  # fmt: skip
     p.add_argument("--reference-paths", type=float, default=100e6, help="to start with")
     p.add_argument("--max-reference-paths", type=float, default=3e9)
+    p.add_argument("--reference-radius", type=float, default=REFERENCE_RADIUS,
+                   help="initial PPM radius of the reference, × scene diagonal")  # fmt: skip
     args = p.parse_args()
     (RESULTS / "estimators").mkdir(parents=True, exist_ok=True)
     for name in args.scenes:
-        record = run_scene(name, int(args.reference_paths), int(args.max_reference_paths))
+        record = run_scene(name, int(args.reference_paths), int(args.max_reference_paths),
+                           args.reference_radius)  # fmt: skip
         (RESULTS / "estimators" / f"{name}.json").write_text(json.dumps(record, indent=1))
         write_markdown()
 
