@@ -72,6 +72,11 @@ def _render_parser() -> _Parser:
         help="dpm, hybrid: weights from dpm-train (default: the shipped model for --k)",
     )  # fmt: skip
     p.add_argument(
+        "--caustic-spp", type=int, metavar="N",
+        help="photon methods: estimate caustics at the first N samples per pixel only "
+        "(default: all; hybrid: 1)",
+    )  # fmt: skip
+    p.add_argument(
         "--denoise", action=argparse.BooleanOptionalAction,
         help="Open Image Denoise with albedo and normal images (default: on for hybrid only)",
     )  # fmt: skip
@@ -125,7 +130,7 @@ def render_main(argv: Sequence[str] | None = None) -> int:
             if hasattr(options, key):
                 setattr(options, key, value)
         keys = ("method", "spp", "photons", "k", "seed", "width", "height", "component", "denoise")
-        for key in keys + ("radius", "photons_per_pass", "checkpoint", "weights"):
+        for key in keys + ("radius", "photons_per_pass", "checkpoint", "weights", "caustic_spp"):
             if getattr(args, key) is not None:
                 setattr(options, key, getattr(args, key))
         options.progress = not args.quiet and sys.stderr.isatty()

@@ -41,6 +41,7 @@ COMPONENTS = ("full", "caustic")
 SAMPLES_PER_STEP = 1 << 16  # pixel samples traced between progress-bar updates
 RADIUS_FRACTION = 1e-3  # default initial radius, as a fraction of the scene's bounding diagonal
 PASSES = 10  # default passes of the progressive methods: photons_per_pass = photons / PASSES
+HYBRID_CAUSTIC_SPP = 1  # the hybrid estimates caustics at this many samples per pixel
 
 
 @dataclass
@@ -60,7 +61,15 @@ class RenderOptions:
     checkpoint: Path | None = None  # ppm/appm: statistics file to resume from and save to
     weights: Path | None = None  # dpm: weight file from dpm-train; None: the shipped model for k
     denoise: bool | None = None  # OIDN with albedo and normal images; None: for hybrid only
+    caustic_spp: int | None = None  # samples per pixel given a caustic estimate; None: all
+    # (hybrid: HYBRID_CAUSTIC_SPP, as the network costs more than a path)
     progress: bool = True
+
+    @property
+    def caustic_samples(self) -> int:
+        """Samples per pixel (the first ones) whose visible points get a caustic estimate."""
+        default = HYBRID_CAUSTIC_SPP if self.method == "hybrid" else self.spp
+        return min(self.spp, self.caustic_spp or default)
 
     @property
     def denoised(self) -> bool:
@@ -96,9 +105,11 @@ def validate(options: RenderOptions) -> None:
         raise InputError("--weights applies to --method dpm and hybrid only")
     if options.method == "sppm" and options.component == "caustic" and options.denoised:
         raise InputError("sppm's caustic component has no albedo and normal images to denoise with")
-    for name in ("spp", "k"):
-        if getattr(options, name) < 1:
-            raise InputError(f"--{name} must be at least 1")
+    if options.caustic_spp is not None and options.method in PATH_TRACERS + ("sppm",):
+        raise InputError("--caustic-spp applies to pm, ppm, appm, dpm and hybrid")
+    for name in ("spp", "k", "caustic_spp"):
+        if getattr(options, name) is not None and getattr(options, name) < 1:
+            raise InputError(f"--{name.replace('_', '-')} must be at least 1")
     if options.photons < 0:
         raise InputError("--photons must not be negative")
     if options.seed < 0:
@@ -210,6 +221,7 @@ def render(scene: Scene, options: RenderOptions | None = None) -> RenderResult:
     if full:
         seconds["shade"] = 0.0
     hits = dropped = 0
+    cs = options.caustic_samples
     blocks = full or method in ("pm", "ppm", "appm", "dpm", "hybrid")
     show = options.progress and rows_per_step < h
     with tqdm(total=h, unit="row", disable=not show, desc=method) as bar:
@@ -228,20 +240,22 @@ def render(scene: Scene, options: RenderOptions | None = None) -> RenderResult:
                 dropped += bad
             if method in ("pm", "ppm", "appm", "dpm", "hybrid"):
                 start = time.perf_counter()
+                some = points.select(points.sample % spp < cs) if cs < spp else points
                 if photons is not None:
                     gathered = gather.seconds
-                    caustic = estimator.estimate(points, photons)
+                    caustic = estimator.estimate(some, photons)
                     seconds["gather"] = seconds.get("gather", 0.0) + gather.seconds - gathered
                     start += gather.seconds - gathered  # "estimate": the rest, kernel or network
                 else:
                     caustic, state = run_passes(
-                        estimator, scene, bvh, points, options.photons, options.seed,
+                        estimator, scene, bvh, some, options.photons, options.seed,
                         checkpoint=options.checkpoint, progress=options.progress,
                     )  # fmt: skip
                     stats["caustic_photons"] = state.photons
                 stage = "network" if method in LEARNED_METHODS else "estimate"
                 seconds[stage] = seconds.get(stage, 0.0) + time.perf_counter() - start
-                radiance += points.throughput * caustic
+                seen = some.throughput * caustic
+                image[row0:row1] += seen.reshape(row1 - row0, w, cs, 3).mean(axis=2)
             image[row0:row1] += radiance.reshape(row1 - row0, w, spp, 3).mean(axis=2)
             if denoised:
                 a, n = guides(points)
@@ -270,6 +284,7 @@ def render(scene: Scene, options: RenderOptions | None = None) -> RenderResult:
     )
     if estimator is not None:
         stats["photon_paths"] = options.photons
+        stats["caustic_spp"] = cs
         if method in NEAREST_METHODS:
             stats["k"] = options.k
         else:

@@ -116,6 +116,8 @@ def test_bad_scene_gives_one_line_and_exit_2(case: str, tmp_path: Path, capsys) 
         (["--seed", "-1"], "--seed"),
         (["--width", "0"], "--width"),
         (["--method", "sppm", "--component", "caustic", "--denoise"], "denoise"),
+        (["--method", "pm", "--caustic-spp", "0"], "--caustic-spp"),
+        (["--caustic-spp", "2"], "--caustic-spp"),
         (["--method", "pm", "--weights", "w.msgpack"], "--weights"),
         (["--method", "ppm", "--radius", "0"], "--radius"),
         (["--method", "appm", "--radius", "-0.1"], "--radius"),

@@ -31,8 +31,8 @@ def test_hybrid_with_a_fresh_network_is_pm_denoised(tmp_path: Path, capsys) -> N
               "--photons", "20000", "--k", str(K)]  # fmt: skip
     out = {}
     for name, flags in [("hybrid", ["--method", "hybrid", "--weights", str(weights)]),
-                        ("pm", ["--method", "pm", "--denoise"]),
-                        ("raw", ["--method", "pm"])]:  # fmt: skip
+                        ("pm", ["--method", "pm", "--denoise", "--caustic-spp", "1"]),
+                        ("raw", ["--method", "pm", "--caustic-spp", "1"])]:  # fmt: skip
         out[name] = tmp_path / f"{name}.exr"
         assert render_main([*common, *flags, "-o", str(out[name])]) == 0
         summary = capsys.readouterr().out
@@ -64,3 +64,15 @@ def test_a_denoised_render_is_the_same_for_any_thread_count(scene_path: Path) ->
         subprocess.run(argv, env=env, check=True)
         images.append(read_exr(out))
     np.testing.assert_array_equal(*images)
+
+
+def test_caustics_at_fewer_samples_per_pixel_keep_the_expectation() -> None:
+    scene = load_scene(EXAMPLES / "ring.obj")
+    opts = {"method": "pm", "component": "caustic", "spp": 4, "photons": 50_000, "k": 20,
+            "width": 48, "height": 48, "progress": False}  # fmt: skip
+    every = render(scene, RenderOptions(**opts)).image
+    assert np.array_equal(every, render(scene, RenderOptions(caustic_spp=4, **opts)).image)
+    first = render(scene, RenderOptions(caustic_spp=1, **opts))
+    assert first.stats["caustic_spp"] == 1
+    assert abs(first.image.mean() / every.mean() - 1) < 0.03
+    assert rmse(first.image, every) < 0.5 * float(every.mean())

@@ -87,6 +87,9 @@ def neighbourhoods(
         )  # fmt: skip
 
 
+MIN_CHUNK = 256  # smallest padded chunk: points
+
+
 def chunk_size(k: int) -> int:
     """Points per inference chunk for K neighbours."""
     return max(1, ACTIVATIONS_PER_CHUNK // k)
@@ -114,6 +117,8 @@ def predict_points(
         for first in range(0, len(b.radius), size):
             part = Batch(*(a[first : first + size] for a in b))
             n = len(part.radius)
-            result = np.asarray(predict(params, pad_batch(part, size)))[:n]
+            # a short chunk pads to a power of two, not to `size`: few shapes, little waste
+            padded = min(size, max(MIN_CHUNK, 1 << (n - 1).bit_length()))
+            result = np.asarray(predict(params, pad_batch(part, padded)))[:n]
             out[rows.start + first : rows.start + first + n] = result
     return out

@@ -11,7 +11,7 @@ method; path tracing from them uses dimensions from SHADE_DIM0 on.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numba as nb
 import numpy as np
@@ -48,6 +48,10 @@ class VisiblePoints:
 
     def __len__(self) -> int:
         return len(self.hit)
+
+    def select(self, mask: np.ndarray) -> VisiblePoints:
+        """The rows where mask (N,) bool is set."""
+        return VisiblePoints(*(getattr(self, f.name)[mask] for f in fields(self)))
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
