@@ -250,6 +250,7 @@ def write_markdown() -> None:
                 f"P={p['photons_per_pass']:,}; APPM r={a['radius']:.4g}, "
                 f"P={a['photons_per_pass']:,}"
             )
+    lines += [f"- {r['scene']}: {r['note']}" for r in records if "note" in r]
     machines = sorted({f"{r['machine']} ({r['date']})" for r in records})
     lines += ["", f"Machine: {'; '.join(machines)}."]
     (RESULTS / "estimators.md").write_text("\n".join(lines) + "\n")
