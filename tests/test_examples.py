@@ -45,7 +45,9 @@ def test_example_loads_and_renders(name: str) -> None:
     centre = (lo + hi) / 2
     for t in scene.emitters.triangles:
         assert np.dot(scene.normals[t], centre - scene.triangles[t].mean(axis=0)) > 0
-    image = render(scene, RenderOptions(spp=1, width=24, height=24, progress=False)).image
+    image = render(
+        scene, RenderOptions(method="pt", spp=1, width=24, height=24, progress=False)
+    ).image
     assert np.all(np.isfinite(image)) and np.all(image >= 0)
     assert image.max() > 0, "the camera sees no light at all"
 

@@ -45,9 +45,9 @@ def test_hybrid_with_a_fresh_network_is_pm_denoised(tmp_path: Path, capsys) -> N
 def test_denoising_lowers_the_error_and_keeps_the_energy(scene_path: Path) -> None:
     scene = load_scene(scene_path)
     size = {"width": 96, "height": 96, "progress": False}
-    reference = render(scene, RenderOptions(spp=256, seed=9, **size)).image
-    noisy = render(scene, RenderOptions(spp=2, **size)).image
-    result = render(scene, RenderOptions(spp=2, denoise=True, **size))
+    reference = render(scene, RenderOptions(method="pt", spp=256, seed=9, **size)).image
+    noisy = render(scene, RenderOptions(method="pt", spp=2, **size)).image
+    result = render(scene, RenderOptions(method="pt", spp=2, denoise=True, **size))
     clean = result.image
     assert result.stats["denoised"] and "denoise" in result.stats["seconds"]
     assert rmse(clean, reference) < 0.7 * rmse(noisy, reference)  # measured: about 0.5

@@ -48,8 +48,8 @@ def pt_renders(name: str, size: int, spp: int, renderer: str) -> list[np.ndarray
     if key not in _RENDERS:
         scene = load_scene(EXAMPLES / f"{name}.obj")
         if renderer == "dpm":
-            opts = [RenderOptions(spp=spp, width=size, height=size, seed=s, progress=False)
-                    for s in SEEDS]  # fmt: skip
+            size_ = {"width": size, "height": size, "progress": False}
+            opts = [RenderOptions(method="pt", spp=spp, seed=s, **size_) for s in SEEDS]
             _RENDERS[key] = [render(scene, o).image for o in opts]
         else:
             camera = scene.camera.with_resolution(size, size)

@@ -22,7 +22,7 @@ EXAMPLES = Path(__file__).parent.parent / "examples" / "scenes"
 
 def test_same_seed_same_image_for_any_thread_count(scene_path: Path) -> None:
     scene = load_scene(scene_path)
-    opts = RenderOptions(spp=2, width=24, height=16, seed=3, progress=False)
+    opts = RenderOptions(method="pt", spp=2, width=24, height=16, seed=3, progress=False)
     before = numba.get_num_threads()
     try:
         numba.set_num_threads(1)
@@ -62,7 +62,7 @@ def test_cli_writes_exr_png_and_stats(scene_path: Path, capsys) -> None:
 def test_pt_and_pt_nocaustic_share_visible_points_and_random_numbers(scene_path: Path) -> None:
     # Without mirrors or glass there are no caustics, so the two methods must agree exactly.
     scene = load_scene(scene_path)
-    opts = RenderOptions(spp=3, width=16, height=12, seed=7, progress=False)
+    opts = RenderOptions(method="pt", spp=3, width=16, height=12, seed=7, progress=False)
     full = render(scene, opts).image
     opts.method = "pt-nocaustic"
     np.testing.assert_array_equal(full, render(scene, opts).image)

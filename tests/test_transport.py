@@ -80,7 +80,7 @@ height = 16
 @pytest.mark.parametrize("target", [(0.0, 0.0, 0.0), (0.3, 0.0, -0.15), (-0.8, 0.0, 0.5)])
 def test_square_light_over_plane_matches_analytic_radiance(tmp_path: Path, target) -> None:
     scene = load_scene(light_over_floor(tmp_path, target))
-    image = render(scene, RenderOptions(spp=256, progress=False)).image
+    image = render(scene, RenderOptions(method="pt", spp=256, progress=False)).image
     # Lambertian: L = ρ/π · E and E = π · LE · F, so L = ρ · LE · F. Light the floor reflects
     # reaches only the black back of the light, so there is no indirect term.
     expected = RHO * LE * rectangle_form_factor(target[0], target[2], SIDE / 2, HEIGHT)
@@ -102,7 +102,7 @@ def furnace(folder: Path, albedo: float, radiance: float) -> Path:
 @pytest.mark.parametrize("albedo", [0.0, 0.5, 0.9])
 def test_furnace_radiance_is_le_over_one_minus_albedo(tmp_path: Path, albedo: float) -> None:
     scene = load_scene(furnace(tmp_path, albedo, radiance=0.75))
-    result = render(scene, RenderOptions(spp=256, progress=False))
+    result = render(scene, RenderOptions(method="pt", spp=256, progress=False))
     expected = 0.75 / (1 - albedo)
     assert result.image.mean() == pytest.approx(expected, rel=0.01)
     # Every pixel, not only the mean; longer paths (higher albedo) are noisier.
