@@ -26,6 +26,7 @@ from dpm.nn.train import (
     TrainConfig,
     init_params,
     load_config,
+    loss_value,
     make_steps,
     mu_law,
     train,
@@ -317,6 +318,7 @@ def test_weight_files_round_trip(tmp_path: Path) -> None:
         ('[data]\nout = "d"\n[extra]\n', "unknown table [extra]"),
         ('[data]\nout = "d"\nreference_radius = 0\n', "reference_radius"),
         ('[data]\nout = "d"\n[train]\nbatch = 2\nscenes_per_batch = 4\n', "batch must"),
+        ('[data]\nout = "d"\n[train]\nloss = "l1"\n', "loss must be one of"),
     ],
 )
 def test_bad_configs_are_one_line(
@@ -348,3 +350,16 @@ def test_point_radiance_is_pure(one_point: Batch) -> None:
     jitted = jax.jit(lambda p, b: point_radiance(model, p, b))(params, single)
     np.testing.assert_allclose(plain, jitted, rtol=1e-5)
     np.testing.assert_allclose(estimate(model, params, one_point), plain, rtol=1e-5)
+
+
+def test_relmse_teaches_the_mean_of_noisy_targets_and_mu_law_does_not() -> None:
+    """At the targets' mean the relmse gradient vanishes; the μ-law one pushes the estimate
+    down, which is why training on noisy PPM references with it darkens every caustic."""
+    target = jnp.asarray(np.random.default_rng(0).exponential(0.05, (20000, 3)), jnp.float32)
+    mean = jnp.full_like(target, float(target.mean()))
+
+    def grad(name: str) -> float:
+        return float(jax.grad(lambda e: loss_value(e, target, name))(mean).sum())
+
+    assert abs(grad("relmse")) < 1e-3 * abs(grad("mu-law"))
+    assert grad("mu-law") > 0  # descending it lowers the estimate below the mean

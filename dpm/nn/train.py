@@ -64,6 +64,11 @@ class TrainConfig:
     validate_every: int = 100  # steps
     checkpoint_seconds: float = 180.0
     seed: int = 0
+    loss: str = "mu-law"  # 'mu-law' (paper Eq. 4) or 'relmse' (unbiased under noisy targets)
+
+
+LOSSES = ("mu-law", "relmse")
+RELMSE_EPSILON = 0.01  # radiance added to the prediction in relmse's denominator
 
 
 @dataclass(frozen=True)
@@ -136,6 +141,8 @@ def load_config(path: str | Path) -> Config:
     if not 0 < d.reference_radius < 1:
         raise InputError(f"{path}: [data] reference_radius must be in (0, 1): a fraction of "
                          "the scene's diagonal")  # fmt: skip
+    if t.loss not in LOSSES:
+        raise InputError(f"{path}: [train] loss must be one of {', '.join(LOSSES)}")
     if t.batch < t.scenes_per_batch:
         raise InputError(f"{path}: [train] batch must be at least scenes_per_batch")
     return config
@@ -212,14 +219,30 @@ class Sampler:
         return batch, np.concatenate(targets)
 
 
-def make_steps(model, learning_rate: float) -> tuple[optax.GradientTransformation, Callable,
-                                                     Callable]:  # fmt: skip
-    """The optimiser, a jitted loss(params, batch, target) and a jitted training step."""
+def loss_value(estimate: jnp.ndarray, target: jnp.ndarray, name: str) -> jnp.ndarray:
+    """The mean loss `name` between estimated and target radiance, both (N, 3) W/(m² sr)."""
+    if name == "relmse":
+        scale = jax.lax.stop_gradient(estimate) + RELMSE_EPSILON
+        return jnp.mean(((estimate - target) / scale) ** 2)
+    return jnp.mean((mu_law(estimate) - mu_law(target)) ** 2)
+
+
+def make_steps(
+    model, learning_rate: float, loss_name: str = "mu-law"
+) -> tuple[optax.GradientTransformation, Callable, Callable]:
+    """The optimiser, a jitted loss(params, batch, target) and a jitted training step.
+
+    'mu-law' is the paper's L2 after Eq. 4. Its minimiser is the mean of μ(target), below
+    μ(mean target) when targets are noisy, so with our PPM targets it learns to darken
+    (measured: a 2.6× too dark mean on held-out scenes). 'relmse' (Noise2Noise's relative
+    L2, the denominator from the prediction, not the target) has the target's mean as its
+    minimiser, so noisy references teach no bias.
+    """
     optimiser = optax.adam(learning_rate)
     predict = jax.vmap(lambda params, b: point_radiance(model, params, b), (None, 0))
 
     def loss(params, batch, target):
-        return jnp.mean((mu_law(predict(params, batch)) - mu_law(target)) ** 2)
+        return loss_value(predict(params, batch), target, loss_name)
 
     @jax.jit
     def step(params, opt_state, batch, target):
@@ -272,7 +295,7 @@ def plot_losses(rows: list[dict], path: Path, title: str) -> None:
     val = [(int(r["step"]), float(r["validation_loss"])) for r in rows if r["validation_loss"]]
     if val:
         ax.plot(*zip(*val, strict=True), "o-", ms=3, label="validation")
-    ax.set(xlabel="step", ylabel="μ-law L2 loss", yscale="log", title=title)
+    ax.set(xlabel="step", ylabel="loss", yscale="log", title=title)
     ax.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=120)
@@ -305,7 +328,7 @@ def train(config: Config, progress: bool = True) -> tuple[dict, list[dict]]:
         tmp.write_text(json.dumps(identity, indent=1))
 
     model = make_model(m.architecture, m.width)
-    optimiser, loss, step = make_steps(model, t.learning_rate)
+    optimiser, loss, step = make_steps(model, t.learning_rate, t.loss)
     params = init_params(model, m.k, t.seed)
     opt_state = optimiser.init(params)
     ocp, manager = _checkpointer(out / "checkpoints")
@@ -330,7 +353,7 @@ def train(config: Config, progress: bool = True) -> tuple[dict, list[dict]]:
             manager.save(at, args=ocp.args.StandardSave({"params": params, "opt_state": opt_state}))
             manager.wait_until_finished()
         with atomic(out / "loss.png") as tmp:
-            plot_losses(rows, tmp, f"{m.architecture}, K = {m.k}")
+            plot_losses(rows, tmp, f"{m.architecture}, K = {m.k}, {t.loss} loss")
 
     previous = signal.signal(signal.SIGTERM, _raise_interrupt)
     bar = tqdm(total=t.steps, initial=done, unit="step", desc="training", disable=not progress)
