@@ -53,7 +53,7 @@ def _render_parser() -> _Parser:
     )
     p.add_argument("scene", type=Path, help="scene .obj file")
     p.add_argument("-o", "--output", type=Path, help="image to write: .exr (linear) or .png")
-    p.add_argument("--method", choices=METHODS, help="rendering method")
+    p.add_argument("--method", choices=METHODS, help="rendering method (default: hybrid)")
     p.add_argument("--spp", type=int, help="samples per pixel")
     p.add_argument("--photons", type=int, help="emitted photon paths (photon methods)")
     p.add_argument("--k", type=int, help="nearest photons per estimate (pm, dpm)")

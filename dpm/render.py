@@ -48,7 +48,7 @@ HYBRID_CAUSTIC_SPP = 1  # the hybrid estimates caustics at this many samples per
 class RenderOptions:
     """What to render; width/height None keep the camera's resolution."""
 
-    method: str = "pt"
+    method: str = "hybrid"
     spp: int = 16
     photons: int = 200_000
     k: int = 50
