@@ -48,8 +48,8 @@ from mitsuba_scene import mitsuba_scene  # noqa: E402  (the test suite's convert
 SCENES = HERE.parent / "examples" / "scenes"
 OUT = HERE / "results" / "hybrid"
 REF_SPP = 4096  # pt-nocaustic samples per pixel of the reference
-REF_CAUSTIC_SPP = 16  # visible points per pixel of the caustic reference
-REF_CAUSTIC_PATHS = 200_000_000  # guided photon paths of the caustic reference
+REF_CAUSTIC_SPP = 4  # visible points per pixel of the caustic reference
+REF_CAUSTIC_PATHS = 50_000_000  # guided photon paths of the caustic reference
 MITSUBA_CHECK_SPP = 4096
 CALIBRATION_SPP = 4
 
@@ -169,6 +169,7 @@ def write_report(records: list[dict], k: int, weights: Path | None) -> None:
         "| scene | method | spp | seconds | RMSE | reference vs Mitsuba 3 (RMSE, mean ratio) |",
         "|---|---|---|---|---|---|",
     ]
+    figures = []
     for r in records:
         e, ratio = r["mitsuba_check"]
         tiles = []
@@ -183,8 +184,9 @@ def write_report(records: list[dict], k: int, weights: Path | None) -> None:
         gap = np.ones((r["reference"].shape[0], 4, 3), np.float32)
         row = np.concatenate([x for t in tiles for x in (t, gap)][:-1], axis=1)
         iio.imwrite(OUT / f"{r['scene']}.png", linear_to_srgb8(row))
-        lines += ["", f"![{r['scene']}: " + ", ".join(r["rows"]) + ", reference]"
-                  f"(hybrid/{r['scene']}.png)", ""]  # fmt: skip
+        figures += ["", f"![{r['scene']}: " + ", ".join(r["rows"]) + ", reference]"
+                    f"(hybrid/{r['scene']}.png)"]  # fmt: skip
+    lines += figures
     (HERE / "results" / "hybrid.md").write_text("\n".join(lines) + "\n")
 
 
