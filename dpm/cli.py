@@ -52,7 +52,11 @@ def _render_parser() -> _Parser:
         description="Render an OBJ scene (with its MTL and optional TOML sidecar).",
     )
     p.add_argument("scene", type=Path, help="scene .obj file")
-    p.add_argument("-o", "--output", type=Path, help="image to write: .exr (linear) or .png")
+    p.add_argument(
+        "-o", "--output", type=Path, action="append",
+        help="image to write: .exr (linear) or .png (sRGB); repeat for both "
+        "(default: SCENE.exr and SCENE.png in the current folder)",
+    )  # fmt: skip
     p.add_argument("--method", choices=METHODS, help="rendering method (default: hybrid)")
     p.add_argument("--spp", type=int, help="samples per pixel")
     p.add_argument("--photons", type=int, help="emitted photon paths (photon methods)")
@@ -116,10 +120,11 @@ def render_main(argv: Sequence[str] | None = None) -> int:
     args = _render_parser().parse_args(argv)
 
     def body() -> None:
-        output = args.output or Path(args.scene.stem + ".png")
-        if output.suffix.lower() not in (".png", ".exr"):
-            raise InputError(f"{output}: output must end in .png or .exr")
-        for path in (output, args.stats, args.checkpoint):
+        outputs = args.output or [Path(args.scene.stem + e) for e in (".exr", ".png")]
+        for output in outputs:
+            if output.suffix.lower() not in (".png", ".exr"):
+                raise InputError(f"{output}: output must end in .png or .exr")
+        for path in (*outputs, args.stats, args.checkpoint):
             if path is not None and not path.resolve().parent.is_dir():
                 raise InputError(f"{path}: output folder does not exist")
         start = time.perf_counter()
@@ -137,14 +142,16 @@ def render_main(argv: Sequence[str] | None = None) -> int:
         result = render(scene, options)  # validates the options first
         result.stats["seconds"]["load"] = load_seconds
         start = time.perf_counter()
-        write_image(output, result.image)
+        for output in outputs:
+            write_image(output, result.image)
         result.stats["seconds"]["write"] = time.perf_counter() - start
         result.stats["scene"] = str(args.scene)
-        result.stats["output"] = str(output)
+        result.stats["output"] = [str(o) for o in outputs]
         if args.stats is not None:
             write_json(args.stats, result.stats)
         if not args.quiet:
-            print(f"wrote {output} ({result.stats['width']}x{result.stats['height']}): "
+            print(f"wrote {', '.join(map(str, outputs))} "
+                  f"({result.stats['width']}x{result.stats['height']}): "
                   + timing_summary(result.stats["seconds"]))  # fmt: skip
 
     return _run("dpm-render", body)

@@ -94,3 +94,14 @@ def test_a_scene_without_specular_surfaces_has_a_black_caustic_image(scene_path:
                              component="caustic", progress=False)  # fmt: skip
         result = render(scene, opts)
         assert result.stats["caustic_photons"] == 0 and not result.image.any(), method
+
+
+def test_cli_writes_exr_and_png_by_default(scene_path: Path, monkeypatch, capsys) -> None:
+    monkeypatch.chdir(scene_path.parent)
+    argv = [str(scene_path), "--width", "12", "--height", "8", "--spp", "1"]
+    assert render_main(argv) == 0
+    assert "scene.exr, scene.png" in capsys.readouterr().out
+    linear, png = read_exr("scene.exr"), iio.imread("scene.png")
+    assert linear.shape == png.shape == (8, 12, 3)
+    assert render_main([*argv, "-o", "b.png", "-o", "b.exr", "--quiet"]) == 0
+    np.testing.assert_array_equal(read_exr("b.exr"), linear)  # same seed, same image
