@@ -36,6 +36,7 @@ PATH_TRACERS = ("pt", "pt-nocaustic")
 PHOTON_METHODS = ("pm", "ppm", "sppm", "appm", "dpm", "hybrid")
 NEAREST_METHODS = ("pm", "dpm", "hybrid")  # one photon map, K nearest photons per visible point
 LEARNED_METHODS = ("dpm", "hybrid")
+AT_POINTS = ("pm", "ppm", "appm", "dpm", "hybrid")  # estimate at this render's visible points
 METHODS = PATH_TRACERS + PHOTON_METHODS
 COMPONENTS = ("full", "caustic")
 SAMPLES_PER_STEP = 1 << 16  # pixel samples traced between progress-bar updates
@@ -105,7 +106,7 @@ def validate(options: RenderOptions) -> None:
         raise InputError("--weights applies to --method dpm and hybrid only")
     if options.method == "sppm" and options.component == "caustic" and options.denoised:
         raise InputError("sppm's caustic component has no albedo and normal images to denoise with")
-    if options.caustic_spp is not None and options.method in PATH_TRACERS + ("sppm",):
+    if options.caustic_spp is not None and options.method not in AT_POINTS:
         raise InputError("--caustic-spp applies to pm, ppm, appm, dpm and hybrid")
     for name in ("spp", "k", "caustic_spp"):
         if getattr(options, name) is not None and getattr(options, name) < 1:
@@ -222,7 +223,7 @@ def render(scene: Scene, options: RenderOptions | None = None) -> RenderResult:
         seconds["shade"] = 0.0
     hits = dropped = 0
     cs = options.caustic_samples
-    blocks = full or method in ("pm", "ppm", "appm", "dpm", "hybrid")
+    blocks = full or method in AT_POINTS
     show = options.progress and rows_per_step < h
     with tqdm(total=h, unit="row", disable=not show, desc=method) as bar:
         for row0 in range(0, h if blocks else 0, rows_per_step):
@@ -238,7 +239,7 @@ def render(scene: Scene, options: RenderOptions | None = None) -> RenderResult:
                 radiance += points.emitted + points.throughput * reflected
                 seconds["shade"] += time.perf_counter() - start
                 dropped += bad
-            if method in ("pm", "ppm", "appm", "dpm", "hybrid"):
+            if method in AT_POINTS:
                 start = time.perf_counter()
                 some = points.select(points.sample % spp < cs) if cs < spp else points
                 if photons is not None:

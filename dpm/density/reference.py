@@ -64,10 +64,10 @@ def ppm_reference(
         )  # fmt: skip
         halves.append(radiance)
         photons += state.photons
-        # a checkpoint from a longer run is used whole rather than cut back
+        # a checkpoint from a longer run (whole passes) is used whole rather than cut back
         asked = n_paths // 2
-        paths += max(asked, state.passes * photons_per_pass) if asked % photons_per_pass == 0 \
-            else asked  # fmt: skip
+        longer = state.passes > -(-asked // photons_per_pass)
+        paths += state.passes * photons_per_pass if longer else asked
     a, b = halves
     mean = ((a.astype(np.float64) + b) / 2).astype(np.float32)
     return Reference(mean, (a, b), caustic_rmse(points, a, b), paths, photons)
