@@ -15,6 +15,11 @@ RESULTS: list[dict] = []  # one row per (scene, engine), filled by the benchmark
 RESULTS_FILE = Path(__file__).parent / "results" / "bvh.md"
 
 
+def pytest_addoption(parser) -> None:
+    """--quick: the suite's minutes-long mode (CI) instead of the hours-long full run."""
+    parser.addoption("--quick", action="store_true", help="run the benchmark suite's quick mode")
+
+
 def median_seconds(benchmark, fn: Callable[[], object], rounds: int) -> float:
     """Median wall seconds of fn over `rounds` runs after one warm-up (compilation excluded)."""
     if not benchmark.enabled:  # --benchmark-disable: one run, timed by hand

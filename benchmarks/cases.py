@@ -1,0 +1,140 @@
+"""One example scene as the benchmark suite sees it: visible points, reference, estimators.
+
+A `Case` holds what every section of the suite needs for a scene: its BVH, the estimator
+table's visible points (one per pixel of a 128-wide image) and PPM reference, and the
+parameters the table tuned at M. `estimators(case, budget)` gives every method the suite
+compares, built for that photon budget.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, replace
+from statistics import median
+
+import numpy as np
+
+from dpm import load_scene
+from dpm.density import PM, make_estimator
+from dpm.density.base import Estimator, luminance
+from dpm.nn.weights import SHIPPED
+from dpm.scene import Scene
+from dpm.tracer import BVH, PhotonMap, VisiblePoints, build_bvh, trace_photons
+from estimator_table import RESULTS, SCENES, WIDTH, M, load_reference, table_points
+
+
+@dataclass
+class Case:
+    """A scene with the estimator table's points, reference and tuned parameters."""
+
+    name: str
+    scene: Scene
+    bvh: BVH
+    points: VisiblePoints  # one per pixel of a WIDTH × height image, row-major
+    reference: np.ndarray  # (N, 3) float32 reference caustic radiance at the points
+    noise: float  # the reference's own RMSE noise
+    record: dict  # benchmarks/results/estimators/NAME.json
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(height, width) of the points' image."""
+        return len(self.points) // WIDTH, WIDTH
+
+    def seen(self, radiance: np.ndarray) -> np.ndarray:
+        """(H, W) camera-weighted caustic luminance of radiance (N, 3) at the points (0: miss)."""
+        hit = self.points.hit
+        out = np.zeros(len(hit), np.float64)
+        out[hit] = luminance(self.points.throughput[hit] * radiance[hit])
+        return out.reshape(self.shape)
+
+    def black_rmse(self) -> float:
+        """RMSE of an all-black estimate: the error of estimating nothing."""
+        return caustic_error(self, np.zeros_like(self.reference))
+
+
+def caustic_error(case: Case, estimate: np.ndarray, mask: np.ndarray | None = None) -> float:
+    """Camera-weighted caustic RMSE (as the estimator table computes it) over the hit points,
+    or over the hit points where mask (N,) bool is set."""
+    hit = case.points.hit if mask is None else case.points.hit & mask
+    w = case.points.throughput[hit].astype(np.float64)
+    d = w * (estimate[hit].astype(np.float64) - case.reference[hit])
+    return float(np.sqrt(np.mean(d * d))) if d.size else float("nan")
+
+
+def finite(estimate: np.ndarray) -> bool:
+    """Every value finite and non-negative."""
+    return bool(np.isfinite(estimate).all() and (estimate >= 0).all())
+
+
+def reference_scenes() -> list[str]:
+    """Example scenes that have a committed reference (made by estimator_table.py)."""
+    return sorted(p.stem for p in (RESULTS / "references_radiance").glob("*.npz"))
+
+
+def load_case(name: str) -> Case:
+    """The Case of example scene `name`."""
+    scene = load_scene(SCENES / f"{name}.obj")
+    bvh = build_bvh(scene)
+    reference, noise = load_reference(name)
+    record = json.loads((RESULTS / "estimators" / f"{name}.json").read_text())
+    return Case(name, scene, bvh, table_points(scene, bvh), reference, noise, record)
+
+
+def shipped_ks() -> list[int]:
+    """K of every shipped DPM model, ascending."""
+    stems = (p.stem[4:] for p in SHIPPED.glob("dpm-*.msgpack"))
+    return sorted(int(s) for s in stems if s.isdigit())
+
+
+def tuned(case: Case, key: str, budget: int) -> Estimator:
+    """The table's best PPM or APPM at M ('ppm_best', 'appm_best'), its passes kept at any
+    budget: the same initial radius and number of passes, so the same final radius."""
+    t = case.record["budgets"][0][key]
+    per_pass = max(1, round(t["photons_per_pass"] * budget / M))
+    return make_estimator(t["method"], radius=t["radius"], photons_per_pass=per_pass)
+
+
+def estimators(case: Case, budget: int) -> dict[str, Estimator]:
+    """Every method the suite compares, by its report name, for `budget` emitted paths."""
+    methods: dict[str, Estimator] = {
+        "PM-50": PM(k=50),
+        "PM-500": PM(k=500),
+        "PPM-best": tuned(case, "ppm_best", budget),
+        "APPM-best": tuned(case, "appm_best", budget),
+    }
+    for k in shipped_ks():
+        methods[f"DPM-{k}"] = make_estimator("dpm", k=k)
+    return methods
+
+
+def needed_k(method: str) -> int:
+    """Photons a method needs at least (its K; 1 for the progressive ones)."""
+    return int(method.split("-")[1]) if method.split("-")[-1].isdigit() else 1
+
+
+def photons(case: Case, budget: int, seed: int = 0) -> PhotonMap:
+    """The caustic photons of `budget` emitted paths (the table's photon map at M for seed 0)."""
+    return trace_photons(case.scene, case.bvh, budget, seed=seed, caustic_only=True)
+
+
+def first_paths(photon_map: PhotonMap, n_paths: int) -> PhotonMap:
+    """The photons of the map's first n_paths emitted paths, as a map from n_paths paths."""
+    keep = photon_map.select(photon_map.path < n_paths)
+    scale = np.float32(photon_map.n_paths / n_paths)  # stored flux is ÷ N
+    return replace(keep, flux=keep.flux * scale, n_paths=n_paths)
+
+
+def timed(fn, rounds: int) -> tuple[object, list[float]]:
+    """fn()'s result and the wall seconds of each of `rounds` calls."""
+    seconds = []
+    for _ in range(rounds):
+        start = time.perf_counter()
+        result = fn()
+        seconds.append(time.perf_counter() - start)
+    return result, seconds
+
+
+def median_or_nan(values: list[float]) -> float:
+    """Median of values, NaN when empty."""
+    return float(median(values)) if values else float("nan")
