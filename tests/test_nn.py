@@ -211,6 +211,28 @@ def test_one_training_step_lowers_the_loss_on_a_fixed_batch(one_point: Batch) ->
         assert float(loss(params, b, target)) < before, architecture
 
 
+def test_balanced_loss_is_one_for_the_uniform_kernel_and_trains() -> None:
+    """The fresh DPM network is the uniform kernel (PM-K): balanced against PM-K its loss is
+    1 on any batch, whatever each part's scale; a μ-law step lowers it (relmse's gradient
+    is the Noise2Noise surrogate's, whose first step need not lower relmse itself)."""
+    photons = plane_photons(3000, 6)
+    rng = np.random.default_rng(3)
+    n = 64
+    position = np.c_[rng.random(n), np.zeros(n), rng.random(n)].astype(np.float32)
+    b = next(neighbourhoods(photons, position, np.tile(np.float32([0, 1, 0]), (n, 1)),
+                            np.full((n, 3), 0.6, np.float32), K))[1]  # fmt: skip
+    target = np.repeat(np.float32([[0.05], [5.0]]), n // 2, axis=0) * np.ones(3, np.float32)
+    part = np.repeat(np.int32([0, 1]), n // 2)
+    model = make_model("dpm", 8)
+    for name in ("relmse", "mu-law"):
+        optimiser, loss, step = make_steps(model, 1e-3, name, balance=True)
+        params = init_params(model, K, 0)
+        assert float(loss(params, b, target, part)) == pytest.approx(1.0, rel=1e-5)
+        if name == "mu-law":
+            params, _, _ = step(params, optimiser.init(params), b, target, part)
+            assert float(loss(params, b, target, part)) < 1.0
+
+
 def test_mu_law_is_eq4() -> None:
     v = jnp.array([0.0, 0.01, 1.0, 50.0])
     np.testing.assert_allclose(mu_law(v), np.log(1 + 5000 * v) / np.log(5001), rtol=1e-6)
@@ -319,6 +341,7 @@ def test_weight_files_round_trip(tmp_path: Path) -> None:
         ('[data]\nout = "d"\nreference_radius = 0\n', "reference_radius"),
         ('[data]\nout = "d"\n[train]\nbatch = 2\nscenes_per_batch = 4\n', "batch must"),
         ('[data]\nout = "d"\n[train]\nloss = "l1"\n', "loss must be one of"),
+        ('[data]\nout = "d"\n[train]\nbalance = 1\n', "balance must be true or false"),
     ],
 )
 def test_bad_configs_are_one_line(
