@@ -4,14 +4,15 @@
     dpm-train --config configs/direct-50.toml
     python benchmarks/ablation.py [RUN ...]
 
-Reads each run's metrics.csv (default runs/dpm-50 and runs/direct-50: the same data, K, width,
-batch and steps) and writes benchmarks/results/ablation.png and ablation.md.
+Reads each run's metrics.csv (default runs/dpm-50-balanced and runs/direct-50: the same
+data, K, width, batch, loss and steps) and writes benchmarks/results/ablation.png and ablation.md.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import json
 from pathlib import Path
 
 import matplotlib
@@ -29,20 +30,28 @@ def validation(run: Path) -> list[tuple[int, float]]:
                 if r["validation_loss"]]  # fmt: skip
 
 
+def loss_label(run: Path) -> str:
+    """What a run's validation loss is, from its config.json."""
+    train = json.loads((run / "config.json").read_text())["train"]
+    name = {"relmse": "relative L2", "mu-law": "μ-law L2"}.get(train["loss"], train["loss"])
+    return f"{name} ÷ PM-K's" if train.get("balance") else name
+
+
 def main() -> None:
     """Plot the runs' validation losses and tabulate them at common steps."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("runs", nargs="*", type=Path, default=[Path("runs/dpm-50"),
+    p.add_argument("runs", nargs="*", type=Path, default=[Path("runs/dpm-50-balanced"),
                                                            Path("runs/direct-50")])  # fmt: skip
     args = p.parse_args()
     missing = [str(run) for run in args.runs if not (run / "metrics.csv").exists()]
     if missing:
         raise SystemExit(f"no metrics.csv in {', '.join(missing)}: run dpm-train first")
     curves = {run.name: validation(run) for run in args.runs}
+    label = loss_label(args.runs[0])
     fig, ax = plt.subplots(figsize=(6, 4))
     for name, points in curves.items():
         ax.plot(*zip(*points, strict=True), "o-", ms=3, label=name)
-    ax.set(xlabel="step", ylabel="validation loss (μ-law L2)", yscale="log",
+    ax.set(xlabel="step", ylabel=f"validation loss ({label})", yscale="log",
            title="Kernel prediction vs direct regression")  # fmt: skip
     ax.legend()
     fig.tight_layout()
@@ -52,7 +61,8 @@ def main() -> None:
     names = list(curves)
     lines = ["# Kernel prediction against direct regression", "",
              "Made by `python benchmarks/ablation.py` (see its docstring); plot: ablation.png.",
-             "", "| step | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]  # fmt: skip
+             f"Validation loss: {label}.", "",
+             "| step | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]  # fmt: skip
     shown = common[:: max(1, len(common) // 10)]
     for step in shown + ([common[-1]] if common and shown[-1] != common[-1] else []):
         lines.append(f"| {step} | " + " | ".join(f"{dict(curves[n])[step]:.5f}" for n in names)
