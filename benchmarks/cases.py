@@ -18,7 +18,8 @@ import numpy as np
 from dpm import load_scene
 from dpm.density import PM, make_estimator
 from dpm.density.base import Estimator, luminance
-from dpm.nn.weights import SHIPPED
+from dpm.density.reference import caustic_rmse
+from dpm.nn.weights import weight_ks
 from dpm.scene import Scene
 from dpm.tracer import BVH, PhotonMap, VisiblePoints, build_bvh, trace_photons
 from estimator_table import RESULTS, SCENES, WIDTH, M, load_reference, table_points
@@ -35,6 +36,13 @@ class Case:
     reference: np.ndarray  # (N, 3) float32 reference caustic radiance at the points
     noise: float  # the reference's own RMSE noise
     record: dict  # benchmarks/results/estimators/NAME.json
+    _at_m: PhotonMap | None = None  # photons_at_m, traced once
+
+    def photons_at_m(self) -> PhotonMap:
+        """The caustic photons of M emitted paths, seed 0 (the table's M map), traced once."""
+        if self._at_m is None:
+            self._at_m = photons(self, M)
+        return self._at_m
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -54,12 +62,13 @@ class Case:
 
 
 def caustic_error(case: Case, estimate: np.ndarray, mask: np.ndarray | None = None) -> float:
-    """Camera-weighted caustic RMSE (as the estimator table computes it) over the hit points,
-    or over the hit points where mask (N,) bool is set."""
-    hit = case.points.hit if mask is None else case.points.hit & mask
-    w = case.points.throughput[hit].astype(np.float64)
-    d = w * (estimate[hit].astype(np.float64) - case.reference[hit])
-    return float(np.sqrt(np.mean(d * d))) if d.size else float("nan")
+    """The estimator table's camera-weighted caustic RMSE over the hit points, or over the
+    hit points where mask (N,) bool is set."""
+    if mask is None:
+        return caustic_rmse(case.points, estimate, case.reference)
+    if not (case.points.hit & mask).any():
+        return float("nan")
+    return caustic_rmse(case.points.select(mask), estimate[mask], case.reference[mask])
 
 
 def finite(estimate: np.ndarray) -> bool:
@@ -81,12 +90,6 @@ def load_case(name: str) -> Case:
     return Case(name, scene, bvh, table_points(scene, bvh), reference, noise, record)
 
 
-def shipped_ks() -> list[int]:
-    """K of every shipped DPM model, ascending."""
-    stems = (p.stem[4:] for p in SHIPPED.glob("dpm-*.msgpack"))
-    return sorted(int(s) for s in stems if s.isdigit())
-
-
 def tuned(case: Case, key: str, budget: int) -> Estimator:
     """The table's best PPM or APPM at M ('ppm_best', 'appm_best'), its passes kept at any
     budget: the same initial radius and number of passes, so the same final radius."""
@@ -103,7 +106,7 @@ def estimators(case: Case, budget: int) -> dict[str, Estimator]:
         "PPM-best": tuned(case, "ppm_best", budget),
         "APPM-best": tuned(case, "appm_best", budget),
     }
-    for k in shipped_ks():
+    for k in weight_ks():
         methods[f"DPM-{k}"] = make_estimator("dpm", k=k)
     return methods
 

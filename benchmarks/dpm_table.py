@@ -24,7 +24,7 @@ from dpm import load_scene
 from dpm.density import gather
 from dpm.density.reference import caustic_rmse
 from dpm.nn.estimator import DPM
-from dpm.nn.weights import SHIPPED, load_weights
+from dpm.nn.weights import SHIPPED, load_weights, weight_ks
 from dpm.tracer import build_bvh, trace_photons
 from estimator_table import RESULTS, SCENES, M, load_reference, table_points
 
@@ -100,8 +100,7 @@ def main() -> None:
     p.add_argument("--weights", type=Path, default=SHIPPED, help="folder of dpm-K.msgpack files")
     args = p.parse_args()
     names = args.scenes or sorted(f.stem for f in (RESULTS / "estimators").glob("*.json"))
-    models = sorted((q for q in args.weights.glob("dpm-*.msgpack") if q.stem[4:].isdigit()),
-                    key=lambda q: int(q.stem[4:]))  # fmt: skip
+    models = [args.weights / f"dpm-{k}.msgpack" for k in weight_ks(args.weights)]
     if not models:
         raise SystemExit(f"no dpm-K.msgpack in {args.weights}: train one with dpm-train first")
     write_markdown([run_scene(name, models) for name in names], models)

@@ -25,7 +25,6 @@ from cases import (  # noqa: E402
     finite,
     first_paths,
     needed_k,
-    photons,
 )
 
 from dpm.density.gather import nearest  # noqa: E402
@@ -105,7 +104,7 @@ def k_close(case: Case, ratios: tuple[float, ...]) -> tuple[list[dict], list[str
     """PM-K and DPM-K on maps of P = ratio·K caustic photons (the first paths of the M map);
     rows {k, ratio, photons, method, rel_rmse, finite} and verdicts, one of which checks that
     P = K − 1 is refused with an InputError."""
-    base = photons(case, M)
+    base = case.photons_at_m()
     order = np.sort(base.path)
     black = case.black_rmse()
     rows, verdicts = [], []
@@ -186,7 +185,7 @@ def sharp_mask(case: Case) -> np.ndarray:
 def crossing_mask(case: Case, k: int = 50) -> np.ndarray:
     """(N,) bool: hit points whose k nearest caustic photons (M paths) include one with a
     disagreeing normal or one off the point's tangent plane by more than CROSSING_HEIGHT·r."""
-    photon_map = photons(case, M)
+    photon_map = case.photons_at_m()
     hit = np.flatnonzero(case.points.hit)
     out = np.zeros(len(case.points), bool)
     position, normal = case.points.position[hit], case.points.normal[hit]

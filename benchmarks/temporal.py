@@ -51,7 +51,7 @@ def run_path(case: Case, frames: int, width: int, degrees: float, truth_budget: 
     converged 'reference' (the table's best APPM at truth_budget paths, on that many)."""
     cam = case.scene.camera
     cameras = orbit(cam.with_resolution(width, width * cam.height // cam.width), frames, degrees)
-    fixed = photons(case, M)
+    fixed = case.photons_at_m()
     record = next(b for b in case.record["budgets"] if b["paths"] == truth_budget)["appm_best"]
     truth = make_estimator(
         "appm", radius=record["radius"], photons_per_pass=record["photons_per_pass"]

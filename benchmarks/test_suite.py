@@ -20,16 +20,15 @@ from accuracy import growth_flags, pareto, plot_combined, plot_errors, plot_scen
 from cases import (
     Case,
     caustic_error,
-    estimators,
     load_case,
     photons,
     reference_scenes,
-    shipped_ks,
     timed,
 )
 from report import FULL, QUICK, Report, table
 
-from dpm.density import gather
+from dpm.density import gather, make_estimator
+from dpm.nn.weights import weight_ks
 from estimator_table import M
 
 
@@ -229,7 +228,7 @@ def losses(suite: Suite, rows: list[dict]) -> None:
 
 def test_paper_tables(suite: Suite) -> None:
     table1, timing, noise = [], [], []
-    ks = shipped_ks()
+    ks = weight_ks()
     for name in suite.s.scenes:
         case = suite.case(name)
         ref = case.record["reference"]
@@ -252,7 +251,7 @@ def test_paper_tables(suite: Suite) -> None:
             }
             photon_map, trace_s = timed(partial(photons, case, budget), 1)
             for k in ks:
-                dpm = estimators(case, budget)[f"DPM-{k}"]
+                dpm = make_estimator("dpm", k=k)
                 dpm.estimate(case.points, photon_map)  # compile outside the timing
                 gather.seconds = 0.0
                 estimate, seconds = timed(partial(dpm.estimate, case.points, photon_map), 1)

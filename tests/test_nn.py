@@ -193,13 +193,18 @@ def test_a_fresh_network_is_the_uniform_kernel() -> None:
     np.testing.assert_allclose(out, PM(k=K).estimate(points, photons), rtol=1e-5)
 
 
-def test_one_training_step_lowers_the_loss_on_a_fixed_batch(one_point: Batch) -> None:
-    photons = plane_photons(3000, 6)
-    rng = np.random.default_rng(7)
-    n = 64
+def plane_batch(n: int, seed: int) -> Batch:
+    """The K nearest plane photons of n random points on the plane (normal +y, albedo 0.6)."""
+    rng = np.random.default_rng(seed)
     position = np.c_[rng.random(n), np.zeros(n), rng.random(n)].astype(np.float32)
-    b = next(neighbourhoods(photons, position, np.tile(np.float32([0, 1, 0]), (n, 1)),
-                            np.full((n, 3), 0.6, np.float32), K))[1]  # fmt: skip
+    return next(neighbourhoods(plane_photons(3000, 6), position,
+                               np.tile(np.float32([0, 1, 0]), (n, 1)),
+                               np.full((n, 3), 0.6, np.float32), K))[1]  # fmt: skip
+
+
+def test_one_training_step_lowers_the_loss_on_a_fixed_batch(one_point: Batch) -> None:
+    n = 64
+    b = plane_batch(n, 7)
     target = np.full((n, 3), 0.05, np.float32)
     for architecture in ("dpm", "dpm-l", "direct"):
         model = make_model(architecture, 8)
@@ -215,12 +220,8 @@ def test_balanced_loss_is_one_for_the_uniform_kernel_and_trains() -> None:
     """The fresh DPM network is the uniform kernel (PM-K): balanced against PM-K its loss is
     1 on any batch, whatever each part's scale; a μ-law step lowers it (relmse's gradient
     is the Noise2Noise surrogate's, whose first step need not lower relmse itself)."""
-    photons = plane_photons(3000, 6)
-    rng = np.random.default_rng(3)
     n = 64
-    position = np.c_[rng.random(n), np.zeros(n), rng.random(n)].astype(np.float32)
-    b = next(neighbourhoods(photons, position, np.tile(np.float32([0, 1, 0]), (n, 1)),
-                            np.full((n, 3), 0.6, np.float32), K))[1]  # fmt: skip
+    b = plane_batch(n, 3)
     target = np.repeat(np.float32([[0.05], [5.0]]), n // 2, axis=0) * np.ones(3, np.float32)
     part = np.repeat(np.int32([0, 1]), n // 2)
     model = make_model("dpm", 8)

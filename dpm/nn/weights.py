@@ -79,11 +79,16 @@ def load_weights(path: str | Path) -> Weights:
     return weights
 
 
+def weight_ks(folder: Path = SHIPPED) -> list[int]:
+    """K of every dpm-K.msgpack in folder (default: the shipped models), ascending."""
+    return sorted(int(p.stem[4:]) for p in folder.glob("dpm-*.msgpack") if p.stem[4:].isdigit())
+
+
 def shipped_weights(k: int) -> Path:
     """Path of the shipped DPM model for K = k; InputError naming the Ks there are."""
     path = SHIPPED / f"dpm-{k}.msgpack"
     if not path.exists():
-        ks = sorted(int(p.stem[4:]) for p in SHIPPED.glob("dpm-*.msgpack") if p.stem[4:].isdigit())
+        ks = weight_ks()
         have = ", ".join(map(str, ks)) if ks else "none yet"
         raise InputError(f"no shipped DPM model for --k {k} (shipped: {have}); train one with "
                          "dpm-train and pass --weights")  # fmt: skip
