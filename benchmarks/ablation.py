@@ -1,6 +1,6 @@
 """Kernel prediction against direct regression (paper Fig. 6): validation loss against step.
 
-    dpm-train --config configs/dpm-50.toml
+    dpm-train --config configs/dpm-50-relmse.toml
     dpm-train --config configs/direct-50.toml
     python benchmarks/ablation.py [RUN ...]
 

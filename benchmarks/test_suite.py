@@ -215,6 +215,18 @@ def losses(suite: Suite, rows: list[dict]) -> None:
         )
     lost = sum(b[-1] == "**loses**" for b in body)
     lines += [f"DPM loses {lost} of {len(body)} comparisons.", ""]
+    noisy = []
+    for name in dict.fromkeys(b[0] for b in body):
+        least = min(o["rmse"] for o in rows if o["scene"] == name and o["rmse"] is not None)
+        if suite.case(name).noise > least / 5:
+            noisy.append(f"{name} (noise {suite.case(name).noise:.4f}, least RMSE {least:.4f})")
+    if noisy:
+        lines += [
+            "The reference of " + ", ".join(noisy) + " is noisier than a fifth of the least "
+            "error: every method's RMSE there includes that noise, which pulls the ratios "
+            "towards 1, so a ratio near 1 on those scenes is no verdict.",
+            "",
+        ]
     for scene, model in dict.fromkeys((b[0], b[1]) for b in body):
         mine = [b for b in body if (b[0], b[1]) == (scene, model)]
         won = [b[2] for b in mine if b[-1] == "wins"]

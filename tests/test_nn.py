@@ -218,18 +218,18 @@ def test_one_training_step_lowers_the_loss_on_a_fixed_batch(one_point: Batch) ->
 
 def test_balanced_loss_is_one_for_the_uniform_kernel_and_trains() -> None:
     """The fresh DPM network is the uniform kernel (PM-K): balanced against PM-K its loss is
-    1 on any batch, whatever each part's scale; a μ-law step lowers it (relmse's gradient
-    is the Noise2Noise surrogate's, whose first step need not lower relmse itself)."""
+    1 on any batch, whatever each part's scale; a μ-law or MSE step lowers it (relmse's
+    gradient is the Noise2Noise surrogate's, whose first step need not lower relmse itself)."""
     n = 64
     b = plane_batch(n, 3)
     target = np.repeat(np.float32([[0.05], [5.0]]), n // 2, axis=0) * np.ones(3, np.float32)
     part = np.repeat(np.int32([0, 1]), n // 2)
     model = make_model("dpm", 8)
-    for name in ("relmse", "mu-law"):
+    for name in ("relmse", "mu-law", "mse", "mse+relmse"):
         optimiser, loss, step = make_steps(model, 1e-3, name, balance=True)
         params = init_params(model, K, 0)
         assert float(loss(params, b, target, part)) == pytest.approx(1.0, rel=1e-5)
-        if name == "mu-law":
+        if name in ("mu-law", "mse"):
             params, _, _ = step(params, optimiser.init(params), b, target, part)
             assert float(loss(params, b, target, part)) < 1.0
 
@@ -376,8 +376,8 @@ def test_point_radiance_is_pure(one_point: Batch) -> None:
     np.testing.assert_allclose(estimate(model, params, one_point), plain, rtol=1e-5)
 
 
-def test_relmse_teaches_the_mean_of_noisy_targets_and_mu_law_does_not() -> None:
-    """At the targets' mean the relmse gradient vanishes; the μ-law one pushes the estimate
+def test_relmse_and_mse_teach_the_mean_of_noisy_targets_and_mu_law_does_not() -> None:
+    """At the targets' mean the relmse and MSE gradients vanish; the μ-law one pushes the estimate
     down, which is why training on noisy PPM references with it darkens every caustic."""
     target = jnp.asarray(np.random.default_rng(0).exponential(0.05, (20000, 3)), jnp.float32)
     mean = jnp.full_like(target, float(target.mean()))
@@ -386,4 +386,5 @@ def test_relmse_teaches_the_mean_of_noisy_targets_and_mu_law_does_not() -> None:
         return float(jax.grad(lambda e: loss_value(e, target, name))(mean).sum())
 
     assert abs(grad("relmse")) < 1e-3 * abs(grad("mu-law"))
+    assert abs(grad("mse")) < 1e-3 * abs(grad("mu-law"))
     assert grad("mu-law") > 0  # descending it lowers the estimate below the mean
