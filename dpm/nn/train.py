@@ -66,7 +66,7 @@ class TrainConfig:
     validate_every: int = 100  # steps
     checkpoint_seconds: float = 180.0
     seed: int = 0
-    loss: str = "mu-law"  # 'mu-law' (paper Eq. 4), 'relmse' or 'mse': see make_steps
+    loss: str = "mu-law"  # one of LOSSES: 'mu-law' is the paper's Eq. 4; see make_steps
     balance: bool = False  # divide each (scene, budget) part's loss by PM-K's: see make_steps
 
 
@@ -284,12 +284,12 @@ def make_steps(
 
     def loss(params, batch, target, part=None):
         estimate = predict(params, batch)
-        values = []
-        for name in loss_name.split("+"):  # 'mse+relmse': the mean of both
-            if balance:
-                values.append(balanced_loss(estimate, uniform(batch), target, part, name))
-            else:
-                values.append(loss_value(estimate, target, name))
+        names = loss_name.split("+")  # 'mse+relmse': the mean of both
+        if balance:
+            flat = uniform(batch)  # once, shared by every named loss
+            values = [balanced_loss(estimate, flat, target, part, name) for name in names]
+        else:
+            values = [loss_value(estimate, target, name) for name in names]
         return sum(values) / len(values)
 
     @jax.jit
