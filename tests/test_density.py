@@ -126,6 +126,16 @@ def test_gathering_matches_brute_force_and_chunking(monkeypatch) -> None:
     assert found == expected and len(pairs.point) == len(found)
 
 
+def test_photon_tree_is_reused_for_one_map_only() -> None:
+    a, b = plane_photons(500, 1), plane_photons(500, 2)
+    assert gather.photon_tree(a) is gather.photon_tree(a)  # a render's row blocks share it
+    point, normal = np.float32([[0.5, 0.5, 0.0]]), np.float32([[0, 0, 1]])
+    for photons in (a, b, a):  # switching maps never answers from the other map's tree
+        d = np.linalg.norm(photons.position - point, axis=1)
+        nb = next(gather.nearest(photons, point, normal, 5))[1]
+        np.testing.assert_array_equal(nb.index[0], np.argsort(d, kind="stable")[:5])
+
+
 @pytest.fixture(scope="module")
 def egg():
     """The glass egg, its BVH and 32×32 visible points (one sample per pixel)."""

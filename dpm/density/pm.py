@@ -41,10 +41,10 @@ class PM:
             return out
         kernel = KERNELS[self.kernel]
         hit = np.flatnonzero(points.hit)
-        flux = np.vstack([photons.flux, np.zeros((1, 3), np.float32)]).astype(np.float64)
         for rows, nb in nearest(photons, points.position[hit], points.normal[hit], self.k):
             r = np.maximum(nb.distance[:, -1:], 1e-30)  # bandwidth: the K-th nearest photon
             weight = np.where(nb.valid, kernel(nb.distance / r) / r**2, 0.0)
-            irradiance = np.einsum("nk,nkc->nc", weight, flux[nb.index])
+            flux = photons.flux[np.minimum(nb.index, len(photons) - 1)]  # pads carry weight 0
+            irradiance = np.einsum("nk,nkc->nc", weight, flux.astype(np.float64))
             out[hit[rows]] = reflected(points.albedo[hit[rows]], irradiance)
         return out

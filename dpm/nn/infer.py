@@ -69,18 +69,22 @@ def neighbourhoods(
     """Batches of the k nearest photons of points (N, 3) with normals and albedos (N, 3);
     angle (N,) turns each tangent frame (default: the canonical angle); tree: see
     `gather.nearest`."""
-    pad = np.zeros((1, 3), np.float32)  # row for missing neighbours (fewer photons than k)
-    photon_position = np.vstack([photons.position, pad]).astype(np.float64)
-    direction = np.vstack([photons.direction, pad])
-    flux = np.vstack([photons.flux, pad])
     angle = np.full(len(position), np.nan, np.float32) if angle is None else angle
+    n = len(photons)
+    src = (photons.position, photons.direction, photons.flux)
+    if n == 0:  # one zero row to index; every neighbour is missing
+        src = (np.zeros((1, 3), np.float32),) * 3
     for rows, nb in nearest(photons, position, normal, k, tree):
         here = np.asarray(position[rows], np.float64)
         radius = np.where(np.isfinite(nb.distance[:, -1]), nb.distance[:, -1], 0.0)
-        offset = photon_position[nb.index] - here[:, None, :]
-        offset[nb.index == len(photons)] = 0.0
+        # missing neighbours (fewer photons than k) carry index n: zero rows, no padded copy
+        missing = (nb.index >= n)[..., None]
+        index = np.minimum(nb.index, max(n - 1, 0))
+        offset = src[0][index].astype(np.float64) - here[:, None, :]
         yield rows, Batch(
-            offset.astype(np.float32), direction[nb.index], flux[nb.index], nb.valid,
+            np.where(missing, 0.0, offset).astype(np.float32),
+            np.where(missing, 0.0, src[1][index]).astype(np.float32),
+            np.where(missing, 0.0, src[2][index]).astype(np.float32), nb.valid,
             np.asarray(normal[rows], np.float32), np.asarray(albedo[rows], np.float32),
             radius.astype(np.float32), np.asarray(angle[rows], np.float32),
             np.full(len(here), photons.n_paths, np.float32),
