@@ -55,6 +55,7 @@ def run_ladder(case: Case, budgets: list[int], rounds: int) -> tuple[list[dict],
             gathers, totals = [], []
             for _ in range(rounds):
                 gather.seconds = 0.0
+                gather.forget_tree()  # a render builds its tree once: count it
                 estimate, seconds = timed(partial(estimator.estimate, case.points, photon_map), 1)
                 totals += seconds
                 gathers.append(gather.seconds)

@@ -67,6 +67,12 @@ def photon_tree(photons: PhotonMap) -> cKDTree:
     return tree
 
 
+def forget_tree() -> None:
+    """Drop the reused photon tree, so that a timed query pays for building its own."""
+    global _last_tree
+    _last_tree = None
+
+
 def nearest(
     photons: PhotonMap,
     position: np.ndarray,
