@@ -56,6 +56,16 @@ def _agree(normal_a: np.ndarray, normal_b: np.ndarray) -> np.ndarray:
     return np.einsum("...i,...i->...", normal_a, normal_b) >= NORMAL_COS
 
 
+def take(values: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """values (P, C) of neighbours index (n, K) -> (n, K, C), zero rows for missing ones
+    (index P: fewer photons than K), without copying values to add a padding row."""
+    if len(values) == 0:
+        return np.zeros((*index.shape, values.shape[1]), values.dtype)
+    out = values[np.minimum(index, len(values) - 1)]
+    out[index >= len(values)] = 0
+    return out
+
+
 def photon_tree(photons: PhotonMap) -> cKDTree:
     """A cKDTree over photons.position (P, 3), reused while the same position array is asked
     for again (the map is frozen; its arrays are never written after tracing)."""
@@ -86,15 +96,14 @@ def nearest(
     start = time.perf_counter()
     if tree is None:
         tree = photon_tree(photons)
-    n_photons = len(photons)
-    normals = np.vstack([photons.normal, np.zeros((1, 3), np.float32)])  # pad row: never agrees
     seconds += time.perf_counter() - start
     for first in range(0, len(position), POINTS_PER_CHUNK):
         start = time.perf_counter()
         rows = slice(first, min(first + POINTS_PER_CHUNK, len(position)))
         dist, index = tree.query(position[rows].astype(np.float64), k=k, workers=-1)
         dist, index = dist.reshape(-1, k), index.reshape(-1, k)  # k = 1 drops the axis
-        valid = (index < n_photons) & _agree(normals[index], normal[rows, None, :])
+        # a missing neighbour's zero normal never agrees
+        valid = _agree(take(photons.normal, index), normal[rows, None, :])
         seconds += time.perf_counter() - start
         yield rows, Neighbourhoods(index, dist, valid)
 

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dpm.density.base import reflected
-from dpm.density.gather import nearest
+from dpm.density.gather import nearest, take
 from dpm.density.kernels import KERNELS
 from dpm.errors import InputError
 from dpm.tracer import PhotonMap, VisiblePoints
@@ -44,7 +44,7 @@ class PM:
         for rows, nb in nearest(photons, points.position[hit], points.normal[hit], self.k):
             r = np.maximum(nb.distance[:, -1:], 1e-30)  # bandwidth: the K-th nearest photon
             weight = np.where(nb.valid, kernel(nb.distance / r) / r**2, 0.0)
-            flux = photons.flux[np.minimum(nb.index, len(photons) - 1)]  # pads carry weight 0
-            irradiance = np.einsum("nk,nkc->nc", weight, flux.astype(np.float64))
+            flux = take(photons.flux, nb.index).astype(np.float64)
+            irradiance = np.einsum("nk,nkc->nc", weight, flux)
             out[hit[rows]] = reflected(points.albedo[hit[rows]], irradiance)
         return out

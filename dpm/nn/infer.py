@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.spatial import cKDTree
 
-from dpm.density.gather import nearest
+from dpm.density.gather import nearest, take
 from dpm.nn.features import MIN_RADIUS, canonical_angle, features, kernel_estimate
 from dpm.nn.model import KernelNet
 from dpm.tracer import PhotonMap
@@ -70,21 +70,14 @@ def neighbourhoods(
     angle (N,) turns each tangent frame (default: the canonical angle); tree: see
     `gather.nearest`."""
     angle = np.full(len(position), np.nan, np.float32) if angle is None else angle
-    n = len(photons)
-    src = (photons.position, photons.direction, photons.flux)
-    if n == 0:  # one zero row to index; every neighbour is missing
-        src = (np.zeros((1, 3), np.float32),) * 3
     for rows, nb in nearest(photons, position, normal, k, tree):
         here = np.asarray(position[rows], np.float64)
         radius = np.where(np.isfinite(nb.distance[:, -1]), nb.distance[:, -1], 0.0)
-        # missing neighbours (fewer photons than k) carry index n: zero rows, no padded copy
-        missing = (nb.index >= n)[..., None]
-        index = np.minimum(nb.index, max(n - 1, 0))
-        offset = src[0][index].astype(np.float64) - here[:, None, :]
+        offset = take(photons.position, nb.index).astype(np.float64) - here[:, None, :]
+        offset[nb.index >= len(photons)] = 0.0  # missing neighbours (fewer photons than k)
         yield rows, Batch(
-            np.where(missing, 0.0, offset).astype(np.float32),
-            np.where(missing, 0.0, src[1][index]).astype(np.float32),
-            np.where(missing, 0.0, src[2][index]).astype(np.float32), nb.valid,
+            offset.astype(np.float32), take(photons.direction, nb.index),
+            take(photons.flux, nb.index), nb.valid,
             np.asarray(normal[rows], np.float32), np.asarray(albedo[rows], np.float32),
             radius.astype(np.float32), np.asarray(angle[rows], np.float32),
             np.full(len(here), photons.n_paths, np.float32),
