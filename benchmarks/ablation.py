@@ -20,7 +20,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-RESULTS = Path(__file__).parent / "results"
+from common import RESULTS  # noqa: E402
 
 
 def validation(run: Path) -> list[tuple[int, float]]:

@@ -2,7 +2,8 @@
 
 Each rung traces the caustic photons of `budget` emitted paths (seed 0) and runs every
 estimator on the table's visible points. Seconds are medians over `rounds` calls after one
-warm-up call per method and scene (JIT compilation excluded): trace + gather + estimate.
+warm-up call per method and scene (JIT compilation excluded): trace + gather + estimate,
+each estimate building its own photon tree (`common.timed_estimate`).
 """
 
 from __future__ import annotations
@@ -16,23 +17,18 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from cases import (  # noqa: E402
-    Case,
-    caustic_error,
-    estimators,
-    finite,
-    median_or_nan,
-    needed_k,
-    photons,
-    timed,
-)
+from cases import Case, caustic_error, estimators, photons  # noqa: E402
+from checks import SOUND, probe, problems  # noqa: E402
 
-from dpm.density import gather  # noqa: E402
+from common import TOTAL, median_or_nan, needed_k, timed, timed_estimate  # noqa: E402
 
 
 def run_ladder(case: Case, budgets: list[int], rounds: int) -> tuple[list[dict], dict]:
     """Rows {scene, method, paths, caustic_photons, rmse, trace_s, gather_s, estimate_s,
-    total_s} for every method and budget, and the estimates (N, 3) by (method, paths)."""
+    total_s, problems, outcome} for every method and budget, and the estimates (N, 3) by
+    (method, paths). A K-nearest method given fewer photons than K is run once, untimed, to
+    see it refuse (rmse None); `problems` lists what it got wrong of `checks.probe`'s
+    must-hold properties."""
     rows, estimates = [], {}
     warm = set()
     for budget in budgets:
@@ -46,28 +42,25 @@ def run_ladder(case: Case, budgets: list[int], rounds: int) -> tuple[list[dict],
                 "caustic_photons": len(photon_map),
                 "trace_s": trace,
             }
-            if len(photon_map) < needed_k(method):
-                rows.append({**row, "rmse": None, "skipped": "K > caustic photons"})
+            if len(photon_map) < needed_k(estimator):
+                _, wrong, outcome = probe(estimator, case.points, photon_map)
+                rows.append({**row, "rmse": None, "problems": wrong, "outcome": outcome})
                 continue
-            if method not in warm:  # compile (numba, XLA) outside the timed calls
-                estimator.estimate(case.points, photon_map)
-                warm.add(method)
-            gathers, totals = [], []
-            for _ in range(rounds):
-                gather.seconds = 0.0
-                gather.forget_tree()  # a render builds its tree once: count it
-                estimate, seconds = timed(partial(estimator.estimate, case.points, photon_map), 1)
-                totals += seconds
-                gathers.append(gather.seconds)
-            g, t = median_or_nan(gathers), median_or_nan(totals)
+            estimate, seconds = timed_estimate(
+                estimator, case.points, photon_map, repeats=rounds, warmup=method not in warm
+            )
+            warm.add(method)
+            gather = seconds.get("gather", 0.0)
+            wrong = problems(estimate, case.points)
             rows.append(
                 {
                     **row,
                     "rmse": caustic_error(case, estimate),
-                    "gather_s": g,
-                    "estimate_s": t - g,
-                    "total_s": trace + t,
-                    "finite": finite(estimate),
+                    "gather_s": gather,
+                    "estimate_s": seconds[TOTAL] - gather,
+                    "total_s": trace + seconds[TOTAL],
+                    "problems": wrong,
+                    "outcome": SOUND,
                 }
             )
             estimates[method, budget] = estimate

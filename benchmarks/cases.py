@@ -3,26 +3,34 @@
 A `Case` holds what every section of the suite needs for a scene: its BVH, the estimator
 table's visible points (one per pixel of a 128-wide image) and PPM reference, and the
 parameters the table tuned at M. `estimators(case, budget)` gives every method the suite
-compares, built for that photon budget.
+compares, built for that photon budget from the method registry.
 """
 
 from __future__ import annotations
 
 import json
-import time
 from dataclasses import dataclass, replace
-from statistics import median
+from pathlib import Path
 
 import numpy as np
 
+from common import (
+    PM_KS,
+    RESULTS,
+    SCENES,
+    WIDTH,
+    M,
+    load_reference,
+    photon_methods,
+    table_points,
+)
 from dpm import load_scene
-from dpm.density import PM, make_estimator
 from dpm.density.base import Estimator, luminance
 from dpm.density.reference import caustic_rmse
+from dpm.methods.base import PASSES, NearestPhotons, default_radius
 from dpm.nn.weights import weight_ks
 from dpm.scene import Scene
 from dpm.tracer import BVH, PhotonMap, VisiblePoints, build_bvh, trace_photons
-from estimator_table import RESULTS, SCENES, WIDTH, M, load_reference, table_points
 
 
 @dataclass
@@ -71,11 +79,6 @@ def caustic_error(case: Case, estimate: np.ndarray, mask: np.ndarray | None = No
     return caustic_rmse(case.points.select(mask), estimate[mask], case.reference[mask])
 
 
-def finite(estimate: np.ndarray) -> bool:
-    """Every value finite and non-negative."""
-    return bool(np.isfinite(estimate).all() and (estimate >= 0).all())
-
-
 def reference_scenes() -> list[str]:
     """Example scenes that have a committed reference (made by estimator_table.py)."""
     return sorted(p.stem for p in (RESULTS / "references_radiance").glob("*.npz"))
@@ -90,30 +93,44 @@ def load_case(name: str) -> Case:
     return Case(name, scene, bvh, table_points(scene, bvh), reference, noise, record)
 
 
-def tuned(case: Case, key: str, budget: int) -> Estimator:
-    """The table's best PPM or APPM at M ('ppm_best', 'appm_best'), its passes kept at any
-    budget: the same initial radius and number of passes, so the same final radius."""
-    t = case.record["budgets"][0][key]
+def tuned(case: Case, name: str, budget: int) -> Estimator | None:
+    """The table's best setting at M of progressive method `name` (its record's NAME_best), its
+    passes kept at any budget: the same initial radius and number of passes, so the same
+    final radius. None when the estimator table did not tune the method."""
+    t = case.record["budgets"][0].get(f"{name}_best")
+    if t is None:
+        return None
     per_pass = max(1, round(t["photons_per_pass"] * budget / M))
-    return make_estimator(t["method"], radius=t["radius"], photons_per_pass=per_pass)
+    return photon_methods()[name].make_estimator(radius=t["radius"], photons_per_pass=per_pass)
 
 
-def estimators(case: Case, budget: int) -> dict[str, Estimator]:
-    """Every method the suite compares, by its report name, for `budget` emitted paths."""
-    methods: dict[str, Estimator] = {
-        "PM-50": PM(k=50),
-        "PM-500": PM(k=500),
-        "PPM-best": tuned(case, "ppm_best", budget),
-        "APPM-best": tuned(case, "appm_best", budget),
-    }
-    for k in weight_ks():
-        methods[f"DPM-{k}"] = make_estimator("dpm", k=k)
+def estimators(case: Case, budget: int, weights: Path | None = None) -> dict[str, Estimator]:
+    """Every method the suite compares, by its report name, for `budget` emitted paths: each
+    registered photon method (`photon_methods`), in registry order.
+
+    - K-nearest methods: NAME-K for K in PM_KS, or, for a learned one (it reads weights),
+      for every K with a NAME-K.msgpack among `weights` (default: the shipped models);
+    - progressive methods: NAME-best, the estimator table's best setting at M (`tuned`), or,
+      for a method the table has not tuned, NAME with the method's default radius and
+      PASSES passes.
+    """
+    methods: dict[str, Estimator] = {}
+    for name, cls in photon_methods().items():
+        label = name.upper()
+        if issubclass(cls, NearestPhotons) and "weights" in cls.options:
+            for k in weight_ks(weights) if weights else weight_ks():
+                files = {} if weights is None else {"weights": weights / f"{name}-{k}.msgpack"}
+                methods[f"{label}-{k}"] = cls.make_estimator(k=k, **files)
+        elif issubclass(cls, NearestPhotons):
+            for k in PM_KS:
+                methods[f"{label}-{k}"] = cls.make_estimator(k=k)
+        elif (best := tuned(case, name, budget)) is not None:
+            methods[f"{label}-best"] = best
+        else:
+            methods[label] = cls.make_estimator(
+                radius=default_radius(case.scene), photons_per_pass=max(1, budget // PASSES)
+            )
     return methods
-
-
-def needed_k(method: str) -> int:
-    """Photons a method needs at least (its K; 1 for the progressive ones)."""
-    return int(method.split("-")[1]) if method.split("-")[-1].isdigit() else 1
 
 
 def photons(case: Case, budget: int, seed: int = 0) -> PhotonMap:
@@ -126,18 +143,3 @@ def first_paths(photon_map: PhotonMap, n_paths: int) -> PhotonMap:
     keep = photon_map.select(photon_map.path < n_paths)
     scale = np.float32(photon_map.n_paths / n_paths)  # stored flux is ÷ N
     return replace(keep, flux=keep.flux * scale, n_paths=n_paths)
-
-
-def timed(fn, rounds: int) -> tuple[object, list[float]]:
-    """fn()'s result and the wall seconds of each of `rounds` calls."""
-    seconds = []
-    for _ in range(rounds):
-        start = time.perf_counter()
-        result = fn()
-        seconds.append(time.perf_counter() - start)
-    return result, seconds
-
-
-def median_or_nan(values: list[float]) -> float:
-    """Median of values, NaN when empty."""
-    return float(median(values)) if values else float("nan")

@@ -7,12 +7,13 @@ import os
 import platform
 import time
 from collections.abc import Callable
-from pathlib import Path
 
 import numba
 
-RESULTS: list[dict] = []  # one row per (scene, engine), filled by the benchmarks
-RESULTS_FILE = Path(__file__).parent / "results" / "bvh.md"
+from common import RESULTS
+
+BVH_ROWS: list[dict] = []  # one row per (scene, engine), filled by test_bvh.py
+BVH_TABLE = RESULTS / "bvh.md"
 
 
 def pytest_addoption(parser) -> None:
@@ -33,10 +34,10 @@ def median_seconds(benchmark, fn: Callable[[], object], rounds: int) -> float:
 
 def pytest_terminal_summary(terminalreporter) -> None:
     """Print and save the BVH table: build time and rays/s per engine, with the ratio."""
-    if not RESULTS:
+    if not BVH_ROWS:
         return
-    scenes = list(dict.fromkeys(r["scene"] for r in RESULTS))
-    by = {(r["scene"], r["engine"]): r for r in RESULTS}
+    scenes = list(dict.fromkeys(r["scene"] for r in BVH_ROWS))
+    by = {(r["scene"], r["engine"]): r for r in BVH_ROWS}
     lines = [
         f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
         f"numba threads {numba.get_num_threads()}; {datetime.date.today().isoformat()}",
@@ -63,7 +64,7 @@ def pytest_terminal_summary(terminalreporter) -> None:
     for line in lines:
         terminalreporter.write_line(line)
     if os.environ.get("DPM_BENCH_SAVE") == "1":
-        RESULTS_FILE.write_text(
+        BVH_TABLE.write_text(
             "# BVH: build time and closest-hit throughput, dpm (Numba) vs Embree (embreex)\n\n"
             "Made by `DPM_BENCH_SAVE=1 pytest benchmarks/test_bvh.py`. Rays are incoherent: "
             "origins uniform in the scene's bounding box, directions uniform on the sphere; "

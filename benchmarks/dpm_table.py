@@ -1,97 +1,57 @@
-"""The learned estimator against the classic ones at the lowest budget M (paper Table 1).
+"""The learned estimators against the classic ones at M (paper Table 1), without the suite.
 
-Caustic RMSE of every shipped DPM model (dpm/nn/weights/dpm-K.msgpack) on the example scenes
-at M emitted paths, next to PM-50, PM-500, PPM-best and APPM-best from the estimator table,
-and the ratio (best classic RMSE) / (DPM-500 RMSE): above 1 means DPM-500 wins.
+Table 1 (`tables.table1`, the table the suite's report shows) at the budgets asked for
+(default M): the estimator table's PM-50, PM-500, PPM-best and APPM-best next to every
+method it does not tune (`cases.estimators`: every shipped DPM model, or those in
+--weights), run here on the same visible points and photon map (seed 0), with each one's
+ratio to the best classic RMSE (below 1: it wins) and its seconds per stage.
 
-    python benchmarks/dpm_table.py [SCENE ...] [--weights DIR]
+    python benchmarks/dpm_table.py [SCENE ...] [--weights DIR] [--budgets N ...]
 
 Needs each scene's benchmarks/results/estimators/SCENE.json and references_radiance/SCENE.npz
-(made by estimator_table.py); writes benchmarks/results/dpm.md. Same visible points and the
-same photon map (seed 0) as the table's M row.
+(made by estimator_table.py); writes benchmarks/results/dpm.md.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
-import time
 from pathlib import Path
 
-from dpm import load_scene
-from dpm.density import gather
-from dpm.density.reference import caustic_rmse
-from dpm.nn.estimator import DPM
-from dpm.nn.weights import SHIPPED, load_weights, weight_ks
-from dpm.tracer import build_bvh, trace_photons
-from estimator_table import RESULTS, SCENES, M, load_reference, table_points
+from cases import load_case
+from tables import table1, timing_table, untabled_columns
 
-CLASSIC = ("pm50", "pm500", "ppm_best", "appm_best")
+from common import RESULTS, M
+from dpm.nn.weights import SHIPPED, weight_ks
 
 
-def run_scene(name: str, models: list[Path]) -> dict:
-    """RMSE and seconds of each model at M on one scene, with the table's classic row."""
-    record = json.loads((RESULTS / "estimators" / f"{name}.json").read_text())
-    reference, noise = load_reference(name)
-    scene = load_scene(SCENES / f"{name}.obj")
-    bvh = build_bvh(scene)
-    points = table_points(scene, bvh)
-    photons = trace_photons(scene, bvh, M, seed=0, caustic_only=True)
-    row = {"scene": name, "caustic_photons": len(photons), "reference_noise": noise}
-    classic = record["budgets"][0]
-    assert classic["paths"] == M and classic["caustic_photons"] == len(photons), name
-    for key in CLASSIC:
-        row[key] = classic[key]["rmse"]
-    for path in models:
-        weights = load_weights(path)
-        estimator = DPM(weights.k, path)
-        if len(photons) < weights.k:
-            row[path.stem] = None
-            continue
-        estimator.estimate(points, photons)  # compile first: time the second call
-        gather.seconds = 0.0
-        gather.forget_tree()  # count the tree build, as PM's timing does
-        start = time.perf_counter()
-        estimate = estimator.estimate(points, photons)
-        total = time.perf_counter() - start
-        row[path.stem] = caustic_rmse(points, estimate, reference)
-        row[f"{path.stem}_seconds"] = {"gather": gather.seconds, "total": total}
-    print(row, flush=True)
-    return row
-
-
-def write_markdown(rows: list[dict], models: list[Path]) -> None:
-    """benchmarks/results/dpm.md from the rows."""
-    names = [p.stem for p in models]
-    head = "| scene | caustic photons | PM-50 | PM-500 | PPM-best | APPM-best | "
-    head += " | ".join(n.upper() for n in names) + " | best classic / DPM-500 | ref noise |"
+def write_markdown(
+    names: list[str], budgets: list[int], weights: Path | None, path: Path = RESULTS / "dpm.md"
+) -> None:
+    """Run the untabled methods on the scenes at the budgets and write dpm.md (or `path`)."""
+    cases = [load_case(name) for name in names]
+    columns, timing = untabled_columns(cases, budgets, weights)
+    records = [case.record for case in cases]
     lines = [
-        "# DPM against the classic estimators at M emitted paths",
+        "# The learned estimators against the classic ones",
         "",
-        "Made by `python benchmarks/dpm_table.py`. Caustic RMSE over one visible point per",
-        f"pixel (camera-weighted) at M = {M:,} emitted paths, against the estimator table's PPM",
-        "reference (`estimators.md`). The last column is above 1 where DPM-500 beats the best",
-        "classic estimator tuned for that scene and budget.",
+        "Made by `python benchmarks/dpm_table.py` (see its docstring): Table 1 of the suite's",
+        "report at " + ", ".join(f"{b:,}" for b in budgets) + " emitted paths. Caustic RMSE",
+        "over one visible point per pixel (camera-weighted) against the estimator table's PPM",
+        "reference (`estimators.md`, whose classic columns these are). *÷ best classic*: the",
+        "method's RMSE over the best classic one tuned for that scene and budget; below 1 it",
+        "wins. **Best**, _second best_.",
         "",
-        head,
-        "|" + "---|" * (8 + len(names)),
+        *table1(records, budgets, columns, rank=True),
+        "",
+        "Seconds of one estimate after compilation (gather: cKDTree build and queries):",
+        "",
+        *timing_table(timing),
+        "",
+        f"Machine: {platform.machine()}, {os.cpu_count()} cores.",
     ]
-    for r in rows:
-        cells = [f"{r[k]:.4f}" if r[k] is not None else "–" for k in (*CLASSIC, *names)]
-        best = min(r[k] for k in CLASSIC if r[k] is not None)
-        dpm500 = r.get("dpm-500")
-        ratio = f"{best / dpm500:.2f}" if dpm500 else "–"
-        lines.append(f"| {r['scene']} | {r['caustic_photons']:,} | " + " | ".join(cells)
-                     + f" | {ratio} | {r['reference_noise']:.4f} |")  # fmt: skip
-    lines += ["", "Seconds (gather / total estimate, after compilation):", ""]
-    for r in rows:
-        parts = [f"{n} {r[n + '_seconds']['gather']:.2f} / {r[n + '_seconds']['total']:.2f}"
-                 for n in names if f"{n}_seconds" in r]  # fmt: skip
-        lines.append(f"- {r['scene']}: " + "; ".join(parts))
-    lines += ["", f"Machine: {platform.machine()}, {os.cpu_count()} cores."]
-    (RESULTS / "dpm.md").write_text("\n".join(lines) + "\n")
+    path.write_text("\n".join(lines) + "\n")
 
 
 def main() -> None:
@@ -99,12 +59,14 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("scenes", nargs="*")
     p.add_argument("--weights", type=Path, default=SHIPPED, help="folder of dpm-K.msgpack files")
+    p.add_argument("--budgets", type=int, nargs="+", default=[M],
+                   help="emitted paths: among the estimator table's M, 10·M and 100·M")  # fmt: skip
     args = p.parse_args()
     names = args.scenes or sorted(f.stem for f in (RESULTS / "estimators").glob("*.json"))
-    models = [args.weights / f"dpm-{k}.msgpack" for k in weight_ks(args.weights)]
-    if not models:
+    if not weight_ks(args.weights):
         raise SystemExit(f"no dpm-K.msgpack in {args.weights}: train one with dpm-train first")
-    write_markdown([run_scene(name, models) for name in names], models)
+    weights = None if args.weights == SHIPPED else args.weights
+    write_markdown(names, args.budgets, weights)
 
 
 if __name__ == "__main__":

@@ -28,47 +28,37 @@ import datetime
 import json
 import os
 import platform
-import time
 from dataclasses import asdict
+from functools import partial
 from pathlib import Path
 
 import numpy as np
+from tables import least_error, table1, tabled
 
+from common import (
+    PM_KS,
+    RESULTS,
+    SCENES,
+    TOTAL,
+    WIDTH,
+    M,
+    markdown_table,
+    save_reference,
+    table_points,
+    timed,
+    timed_estimate,
+)
 from dpm import load_scene
-from dpm.density import PM, gather
+from dpm.density import PM
 from dpm.density.reference import Reference, caustic_rmse, ppm_reference
 from dpm.density.tuning import Trial, best, radii, rescore, tune_widening
 from dpm.io import atomic
 from dpm.scene import Scene
-from dpm.tracer import BVH, VisiblePoints, build_bvh, trace_photons, trace_visible_points
+from dpm.tracer import BVH, VisiblePoints, build_bvh, trace_photons
 
-HERE = Path(__file__).parent
-SCENES = HERE.parent / "examples" / "scenes"
-RESULTS = HERE / "results"
-M = 700_000
-WIDTH = 128  # visible points: one per pixel of a WIDTH-wide image, seed 0
 REFERENCE_RADIUS = 5e-4  # × scene diagonal, default
 REFERENCE_PATHS_PER_PASS = 1_000_000  # guided paths
 NOISE_EXPONENT = 0.32  # reference noise ∝ paths^-0.32 (glass egg, 20M to 600M paths)
-
-
-def table_points(scene: Scene, bvh: BVH) -> VisiblePoints:
-    """The table's visible points: one per pixel of a WIDTH-wide image, seed 0."""
-    camera = scene.camera.with_resolution(WIDTH, WIDTH * scene.camera.height // scene.camera.width)
-    return trace_visible_points(scene, bvh, camera, 1, 0, (0, camera.height))
-
-
-def save_reference(name: str, ref: Reference) -> None:
-    """Keep a scene's reference radiance (committed, so later tables need no rerun)."""
-    path = RESULTS / "references_radiance" / f"{name}.npz"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(path, radiance=ref.radiance, noise=ref.noise, paths=ref.n_paths)
-
-
-def load_reference(name: str) -> tuple[np.ndarray, float]:
-    """(N, 3) reference caustic radiance at `table_points` and its noise, as saved."""
-    with np.load(RESULTS / "references_radiance" / f"{name}.npz") as f:
-        return f["radiance"], float(f["noise"])
 
 
 def run_budget(
@@ -87,21 +77,18 @@ def run_budget(
         with np.load(saved) as f:
             row = json.loads(str(f["row"]))
             trials = [Trial(**t) for t in json.loads(str(f["trials"]))]
-            pm = {k: (f[f"pm{k}"] if f"pm{k}" in f else None) for k in (50, 500)}
+            pm = {k: (f[f"pm{k}"] if f"pm{k}" in f else None) for k in PM_KS}
             return row, pm, trials, list(f["estimates"])
-    start = time.perf_counter()
-    photons = trace_photons(scene, bvh, n, seed=0, caustic_only=True)
-    row = {"paths": n, "caustic_photons": len(photons), "trace_seconds": 0.0}
-    row["trace_seconds"] = time.perf_counter() - start
+    photons, (trace_s,) = timed(partial(trace_photons, scene, bvh, n, seed=0, caustic_only=True))
+    row = {"paths": n, "caustic_photons": len(photons), "trace_seconds": trace_s}
     pm = {}
-    for k in (50, 500):
-        gather.seconds = 0.0
-        gather.forget_tree()  # PM-500 builds its own tree, as a render would
-        start = time.perf_counter()
-        pm[k] = PM(k=k).estimate(points, photons) if len(photons) >= k else None
-        total = time.perf_counter() - start
-        row[f"pm{k}"] = {"gather_seconds": gather.seconds,
-                         "estimate_seconds": total - gather.seconds}  # fmt: skip
+    for k in PM_KS:  # each builds its own tree, as a render would
+        pm[k], seconds = None, {}
+        if len(photons) >= k:
+            pm[k], seconds = timed_estimate(PM(k=k), points, photons)
+        gather = seconds.get("gather", 0.0)
+        row[f"pm{k}"] = {"gather_seconds": gather,
+                         "estimate_seconds": seconds.get(TOTAL, 0.0) - gather}  # fmt: skip
     estimates: list[np.ndarray] = []
     trials = tune_widening(points, photons, reference, radii(diagonal), estimates)
     arrays = {f"pm{k}": e for k, e in pm.items() if e is not None}
@@ -124,12 +111,12 @@ def run_scene(
 
     def reference(paths: int) -> Reference:
         nonlocal reference_seconds
-        start = time.perf_counter()
-        ref = ppm_reference(
-            scene, bvh, points, paths, reference_radius * diagonal, REFERENCE_PATHS_PER_PASS,
-            seed=1, checkpoint_dir=RESULTS / "references" / name, progress=True,
-        )  # fmt: skip
-        reference_seconds += time.perf_counter() - start
+        ref, (seconds,) = timed(partial(
+            ppm_reference, scene, bvh, points, paths, reference_radius * diagonal,
+            REFERENCE_PATHS_PER_PASS, seed=1, checkpoint_dir=RESULTS / "references" / name,
+            progress=True,
+        ))  # fmt: skip
+        reference_seconds += seconds
         print(name, f"reference {ref.n_paths:,} paths: noise {ref.noise:.5f}", flush=True)
         return ref
 
@@ -148,7 +135,7 @@ def run_scene(
                 row[f"pm{k}"]["rmse"] = rmse
             trials = rescore(trials, estimates, points, ref.radiance)
             row["trials"] = [asdict(t) for t in trials]
-            for method in ("ppm", "appm"):
+            for method in dict.fromkeys(t.method for t in trials):
                 row[f"{method}_best"] = asdict(best(trials, method))
         least = min(least_error(row) for row in rows)
         if ref.noise <= least / 5 or ref.n_paths >= max_reference_paths:
@@ -175,25 +162,9 @@ def run_scene(
     }  # fmt: skip
 
 
-def least_error(row: dict) -> float:
-    """The least RMSE of one budget's PM-50, PM-500, PPM-best and APPM-best."""
-    values = (row["pm50"]["rmse"], row["pm500"]["rmse"], row["ppm_best"]["rmse"],
-              row["appm_best"]["rmse"])  # fmt: skip
-    return min(v for v in values if v is not None)
-
-
-def edge(row: dict, method: str) -> str:
-    """'†' when the method's best radius is the smallest or largest it tried, else ''."""
-    tried = [t["radius"] for t in row["trials"] if t["method"] == method]
-    return "†" if row[f"{method}_best"]["radius"] in (min(tried), max(tried)) else ""
-
-
-def fmt(x: float | None) -> str:
-    return "–" if x is None else f"{x:.4f}"
-
-
-def write_markdown() -> None:
-    """Rebuild estimators.md from every scene's JSON."""
+def write_markdown(path: Path = RESULTS / "estimators.md") -> None:
+    """Rebuild estimators.md from every scene's JSON: Table 1 (`tables.table1`), the seconds
+    per stage and the best settings."""
     records = [json.loads(p.read_text()) for p in sorted((RESULTS / "estimators").glob("*.json"))]
     lines = [
         "# Caustic RMSE of the classic estimators",
@@ -206,55 +177,45 @@ def write_markdown() -> None:
         "photons per pass, more radii where the best was at an edge), chosen per scene and",
         "budget; † marks a best that is still at an edge of the radii tried.",
         "",
-        "| scene | paths | caustic photons | PM-50 | PM-500 | PPM-best | APPM-best "
-        "| ref noise | noise ≤ ⅕ min | ref r₀ (× diagonal) |",
-        "|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for r in records:
-        smallest = min(least_error(b) for b in r["budgets"])
-        noise = r["reference"]["noise"]
-        for b in r["budgets"]:
-            lines.append(
-                f"| {r['scene']} | {b['paths']:,} | {b['caustic_photons']:,} "
-                f"| {fmt(b['pm50']['rmse'])} | {fmt(b['pm500']['rmse'])} "
-                f"| {fmt(b['ppm_best']['rmse'])}{edge(b, 'ppm')} "
-                f"| {fmt(b['appm_best']['rmse'])}{edge(b, 'appm')} "
-                f"| {noise:.4f} | {'yes' if noise <= smallest / 5 else 'no'} "
-                f"| {r['reference']['radius'] / r['diagonal']:.1e} |"
-            )
-    lines += [
+        *table1(records),
         "",
         "## Seconds per stage",
         "",
         "Trace: caustic photon paths. Gather: cKDTree build and queries. Estimate: the rest of",
         "the estimator (kernel sums, PPM/APPM statistics). For PPM/APPM-best, gather + estimate.",
         "",
-        "| scene | paths | trace | PM-50 gather | PM-50 estimate | PM-500 gather "
-        "| PM-500 estimate | PPM-best | APPM-best | reference |",
-        "|---|---|---|---|---|---|---|---|---|---|",
     ]
+    columns = tabled(records[0]["budgets"][0])
+    head = ["scene", "paths", "trace"]
+    for label, key in columns.items():
+        head += [label] if key.endswith("_best") else [f"{label} gather", f"{label} estimate"]
+    body = []
     for r in records:
         for b in r["budgets"]:
-            lines.append(
-                f"| {r['scene']} | {b['paths']:,} | {b['trace_seconds']:.2f} "
-                f"| {b['pm50']['gather_seconds']:.2f} | {b['pm50']['estimate_seconds']:.2f} "
-                f"| {b['pm500']['gather_seconds']:.2f} | {b['pm500']['estimate_seconds']:.2f} "
-                f"| {b['ppm_best']['seconds']:.2f} | {b['appm_best']['seconds']:.2f} "
-                f"| {r['reference']['paths']:,} paths |"
-            )
+            cells = [r["scene"], f"{b['paths']:,}", f"{b['trace_seconds']:.2f}"]
+            for key in columns.values():
+                stage = b[key]
+                cells += (
+                    [f"{stage['seconds']:.2f}"]
+                    if key.endswith("_best")
+                    else [f"{stage['gather_seconds']:.2f}", f"{stage['estimate_seconds']:.2f}"]
+                )
+            body.append([*cells, f"{r['reference']['paths']:,} paths"])
+    lines += markdown_table([*head, "reference"], body)
     lines += ["", "Best settings (initial radius in scene units / emitted paths per pass):", ""]
     for r in records:
         for b in r["budgets"]:
-            p, a = b["ppm_best"], b["appm_best"]
-            lines.append(
-                f"- {r['scene']} {b['paths']:,}: PPM r={p['radius']:.4g}, "
-                f"P={p['photons_per_pass']:,}; APPM r={a['radius']:.4g}, "
-                f"P={a['photons_per_pass']:,}"
-            )
+            settings = [
+                f"{key.removesuffix('_best').upper()} r={b[key]['radius']:.4g}, "
+                f"P={b[key]['photons_per_pass']:,}"
+                for key in tabled(b).values()
+                if key.endswith("_best")
+            ]
+            lines.append(f"- {r['scene']} {b['paths']:,}: " + "; ".join(settings))
     lines += [f"- {r['scene']}: {r['note']}" for r in records if "note" in r]
     machines = sorted({f"{r['machine']} ({r['date']})" for r in records})
     lines += ["", f"Machine: {'; '.join(machines)}."]
-    (RESULTS / "estimators.md").write_text("\n".join(lines) + "\n")
+    path.write_text("\n".join(lines) + "\n")
 
 
 def main() -> None:

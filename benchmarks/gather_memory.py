@@ -14,13 +14,13 @@ import resource
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
+from common import RESULTS
 from dpm.density import gather
 
-RESULTS = Path(__file__).parent / "results" / "gather_memory.md"
+OUTPUT = RESULTS / "gather_memory.md"
 N_PHOTONS, N_POINTS = 10_000_000, 512 * 512
 
 
@@ -85,7 +85,7 @@ def main() -> None:
         lines.append(f"| {r['stage']} | {r['seconds']:.1f} | {r['data_mib']:.0f} "
                      f"| {r['peak_mib']:.0f} | {r['peak_mib'] - r['data_mib']:.0f} |")  # fmt: skip
     lines += ["", f"Machine: {os.cpu_count()} cores."]
-    RESULTS.write_text("\n".join(lines) + "\n")
+    OUTPUT.write_text("\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":

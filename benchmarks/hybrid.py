@@ -24,14 +24,13 @@ import argparse
 import datetime
 import os
 import platform
-import sys
 import tempfile
-import time
 from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
 
+from common import RESULTS, SCENES, timed
 from dpm import load_scene
 from dpm.camera import Camera
 from dpm.denoise import denoise
@@ -41,13 +40,9 @@ from dpm.metrics import rmse
 from dpm.render import RenderOptions, render
 from dpm.scene import Scene
 from dpm.tracer import build_bvh, trace_visible_points
+from dpm.validation.mitsuba import load_mitsuba, mitsuba_scene
 
-HERE = Path(__file__).parent
-sys.path.insert(0, str(HERE.parent / "tests"))
-from mitsuba_scene import mitsuba_scene  # noqa: E402  (the test suite's converter)
-
-SCENES = HERE.parent / "examples" / "scenes"
-OUT = HERE / "results" / "hybrid"
+OUT = RESULTS / "hybrid"
 REF_SPP = 4096  # pt-nocaustic samples per pixel of the reference
 REF_CAUSTIC_SPP = 4  # visible points per pixel of the caustic reference
 REF_CAUSTIC_PATHS = 50_000_000  # guided photon paths of the caustic reference
@@ -88,8 +83,7 @@ def reference(scene: Scene, camera: Camera, name: str) -> np.ndarray:
 
 def mitsuba(scene: Scene, camera: Camera, spp: int, seed: int) -> tuple[np.ndarray, ...]:
     """Mitsuba 3 `path` with albedo and shading-normal AOVs: three (H, W, 3) images."""
-    import mitsuba as mi
-
+    mi = load_mitsuba()
     with tempfile.TemporaryDirectory() as folder:
         desc = mitsuba_scene(scene, camera, spp, Path(folder))
         desc["integrator"] = {
@@ -101,13 +95,6 @@ def mitsuba(scene: Scene, camera: Camera, spp: int, seed: int) -> tuple[np.ndarr
     return out[..., :3], np.clip(out[..., 3:6], 0, 1), out[..., 6:9]
 
 
-def timed(fn) -> tuple[object, float]:
-    """fn()'s result and its wall seconds."""
-    start = time.perf_counter()
-    result = fn()
-    return result, time.perf_counter() - start
-
-
 def equal_time_spp(fn, budget: float) -> int:
     """Samples per pixel that make fn(spp) take about `budget` seconds.
 
@@ -115,7 +102,7 @@ def equal_time_spp(fn, budget: float) -> int:
     """
     fn(1)
     lo, hi = CALIBRATION_SPP, 4 * CALIBRATION_SPP
-    t_lo, t_hi = (timed(lambda n=n: fn(n))[1] for n in (lo, hi))
+    t_lo, t_hi = (timed(lambda n=n: fn(n))[1][0] for n in (lo, hi))
     per_spp = max((t_hi - t_lo) / (hi - lo), 1e-9)
     return max(1, int((budget - (t_lo - per_spp * lo)) / per_spp))
 
@@ -133,21 +120,21 @@ def run_scene(name: str, width: int, k: int, weights: Path | None) -> dict:
         scene,
         RenderOptions(method="hybrid", k=k, weights=weights, width=16, height=16, progress=False),
     )  # fmt: skip  (warm-up: compile)
-    result, budget = timed(lambda: render(scene, hybrid))
+    result, (budget,) = timed(lambda: render(scene, hybrid))
     rows = {"hybrid": (result.image, budget, hybrid.spp)}
 
     def pt(spp: int) -> np.ndarray:
         return render(scene, RenderOptions(method="pt", spp=spp, denoise=True, **size)).image
 
     spp = equal_time_spp(pt, budget)
-    image, seconds = timed(lambda: pt(spp))
+    image, (seconds,) = timed(lambda: pt(spp))
     rows["dpm pt + OIDN"] = (image, seconds, spp)
 
     def mi(spp: int) -> np.ndarray:
         return denoise(*mitsuba(scene, camera, spp, seed=0))
 
     spp = equal_time_spp(mi, budget)
-    image, seconds = timed(lambda: mi(spp))
+    image, (seconds,) = timed(lambda: mi(spp))
     rows["Mitsuba 3 path + OIDN"] = (image, seconds, spp)
 
     check = mitsuba(scene, camera, MITSUBA_CHECK_SPP, seed=1)[0]
@@ -166,7 +153,7 @@ def default_render_seconds() -> tuple[float, dict]:
         if hasattr(options, key):  # as dpm-render does
             setattr(options, key, value)
     render(scene, options)
-    result, seconds = timed(lambda: render(scene, options))
+    result, (seconds,) = timed(lambda: render(scene, options))
     return seconds, result.stats["seconds"]
 
 
@@ -210,7 +197,7 @@ def write_report(records: list[dict], k: int, weights: Path | None) -> None:
         figures += ["", f"![{r['scene']}: " + ", ".join(r["rows"]) + ", reference]"
                     f"(hybrid/{r['scene']}.png)"]  # fmt: skip
     lines += figures
-    (HERE / "results" / "hybrid.md").write_text("\n".join(lines) + "\n")
+    (RESULTS / "hybrid.md").write_text("\n".join(lines) + "\n")
 
 
 def main() -> None:

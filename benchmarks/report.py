@@ -39,13 +39,6 @@ def machine() -> str:
     )
 
 
-def table(head: list[str], rows: list[list[str]]) -> list[str]:
-    """A Markdown table."""
-    return ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)] + [
-        "| " + " | ".join(r) + " |" for r in rows
-    ]
-
-
 @dataclass
 class Report:
     """Sections of Markdown and data rows, written to `folder` by `write`."""

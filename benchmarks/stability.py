@@ -1,16 +1,18 @@
-"""Stability where density estimators fail: each study returns rows, a chart and verdicts.
+"""Stability where density estimators fail: each study returns rows, a chart and checks.
 
 - sparse photons: the ladder's lowest rungs (a few hundred caustic photons);
-- K close to the photon count: maps cut to P = K … 10·K photons;
+- K close to the photon count: maps cut to P = K … 10·K photons, and K − 1;
 - thin, high-frequency caustics: the error over the reference's sharpest 5 % of pixels;
 - neighbourhoods that cross surfaces (corners, walls): the bias where the K nearest photons
   include ones on another surface.
-A verdict is "PASS" or "FAIL" with the figure that decided it.
+Each study's lines are `checks.Check`s: what every method must do there (asserted by the
+suite) and findings, how well each method did (reported, never asserted).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -18,50 +20,36 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from accuracy import colour  # noqa: E402
-from cases import (  # noqa: E402
-    Case,
-    caustic_error,
-    estimators,
-    finite,
-    first_paths,
-    needed_k,
-)
+from cases import Case, caustic_error, estimators, first_paths  # noqa: E402
+from checks import Check, finding, must, probe, problems  # noqa: E402
 
-from dpm.density.gather import nearest  # noqa: E402
-from dpm.errors import InputError  # noqa: E402
-from estimator_table import M  # noqa: E402
+from common import M, needed_k  # noqa: E402
+from dpm.density import PhotonIndex  # noqa: E402
+from dpm.tracer import PhotonMap, VisiblePoints  # noqa: E402
 
 SHARP_FRACTION = 0.05  # thin-caustic mask: this fraction of hit pixels, by reference gradient
 CROSSING_HEIGHT = 0.1  # a neighbour this far off the tangent plane (× r) is on another surface
+BIAS_LIMIT = 0.2  # the crossing study's findings say whether a bias is within ±20 %
 
 
-def verdict(ok: bool, why: str) -> str:
-    """'PASS: why' or 'FAIL: why'."""
-    return f"{'PASS' if ok else 'FAIL'}: {why}"
+def than_black(ratio: float) -> str:
+    """A finding's text for RMSE ÷ the all-black estimate's RMSE."""
+    return f"RMSE {ratio:.2f}× the all-black estimate" + (
+        " (worse than estimating nothing)" if ratio >= 1 else ""
+    )
 
 
-def sparse_verdicts(rows: list[dict], black: dict[str, float]) -> list[str]:
-    """At each scene's lowest budget: every method that ran is finite and beats black."""
+def sparse(rows: list[dict], black: dict[str, float]) -> list[Check]:
+    """At each scene's lowest budget, per method: must hold, its answer (or its refusal of
+    K > P) as the ladder checked it; finding, its RMSE against estimating black."""
     out = []
     for scene in dict.fromkeys(r["scene"] for r in rows):
         low = min(r["paths"] for r in rows if r["scene"] == scene)
         for r in (r for r in rows if r["scene"] == scene and r["paths"] == low):
-            if r["rmse"] is None:
-                out.append(
-                    f"{scene} {r['method']} at {r['caustic_photons']} caustic photons: "
-                    f"skipped ({r['skipped']})"
-                )
-                continue
-            ratio = r["rmse"] / black[scene]
-            ok = r["finite"] and ratio < 1
-            out.append(
-                f"{scene} {r['method']} at {r['caustic_photons']} caustic photons: "
-                + verdict(
-                    ok,
-                    f"RMSE {ratio:.2f}× the all-black estimate"
-                    + ("" if r["finite"] else ", non-finite or negative values"),
-                )
-            )
+            subject = f"{scene} {r['method']} at {r['caustic_photons']} caustic photons"
+            out.append(must(subject, r["problems"], r["outcome"]))
+            if r["rmse"] is not None:
+                out.append(finding(subject, than_black(r["rmse"] / black[scene])))
     return out
 
 
@@ -100,52 +88,63 @@ def plot_sparse(rows: list[dict], black: dict[str, float], path: Path) -> None:
     plt.close(fig)
 
 
-def k_close(case: Case, ratios: tuple[float, ...]) -> tuple[list[dict], list[str]]:
-    """PM-K and DPM-K on maps of P = ratio·K caustic photons (the first paths of the M map);
-    rows {k, ratio, photons, method, rel_rmse, finite} and verdicts, one of which checks that
-    P = K − 1 is refused with an InputError."""
-    base = case.photons_at_m()
-    order = np.sort(base.path)
-    black = case.black_rmse()
-    rows, verdicts = [], []
-    methods = estimators(case, M)
-    for method, estimator in methods.items():
-        k = needed_k(method)
-        if k == 1:
+def cut(photon_map: PhotonMap, n_photons: int) -> PhotonMap:
+    """The map of the first emitted paths of photon_map that hold its first n_photons."""
+    last = int(np.sort(photon_map.path)[n_photons - 1])
+    return first_paths(photon_map, last + 1)
+
+
+def k_close_probes(
+    subject: str,
+    estimator: Any,
+    points: VisiblePoints,
+    base: PhotonMap,
+    ratios: tuple[float, ...],
+) -> tuple[list[dict], list[Check]]:
+    """A K-nearest estimator on maps cut from `base` to P = ratio·K photons and to K − 1:
+    rows {k, ratio, photons, estimate} (estimate None where it refused) and the must-hold
+    checks (P ≥ K answered soundly, K − 1 refused with a one-line InputError). Needs no
+    reference: the same checks run on made-up estimators in test_checks.py."""
+    k = needed_k(estimator)
+    rows, checks = [], []
+    for ratio in ratios:
+        want = int(round(ratio * k))
+        if want > len(base):
             continue
-        for ratio in ratios:
-            want = int(round(ratio * k))
-            if want > len(order):
-                continue
-            cut = first_paths(base, int(order[want - 1]) + 1)
-            estimate = estimator.estimate(case.points, cut)
-            rel = caustic_error(case, estimate) / black
-            rows.append(
-                {
-                    "scene": case.name,
-                    "method": method,
-                    "k": k,
-                    "ratio": ratio,
-                    "photons": len(cut),
-                    "rel_rmse": rel,
-                    "finite": finite(estimate),
-                }
-            )
-        at_k = [r for r in rows if r["method"] == method]
-        if at_k:
-            worst = max(r["rel_rmse"] for r in at_k)
-            ok = all(r["finite"] for r in at_k) and worst < 1
-            verdicts.append(
-                f"{case.name} {method}, P = K … {at_k[-1]['ratio']:g}·K: "
-                + verdict(ok, f"worst RMSE {worst:.2f}× the all-black estimate")
-            )
-        fewer = first_paths(base, int(order[k - 2]) + 1)  # K − 1 photons
-        try:
-            estimator.estimate(case.points, fewer)
-            verdicts.append(f"{case.name} {method}, P = K − 1: " + verdict(False, "no error"))
-        except InputError as e:
-            verdicts.append(f"{case.name} {method}, P = K − 1: " + verdict(True, f"refused: {e}"))
-    return rows, verdicts
+        photons = cut(base, want)
+        estimate, wrong, done = probe(estimator, points, photons)
+        checks.append(must(f"{subject}, P = {ratio:g}·K = {len(photons)}", wrong, done))
+        rows.append({"k": k, "ratio": ratio, "photons": len(photons), "estimate": estimate})
+    if 2 <= k <= len(base) + 1:
+        _, wrong, done = probe(estimator, points, cut(base, k - 1))
+        checks.append(must(f"{subject}, P = K − 1 = {k - 1}", wrong, done))
+    return rows, checks
+
+
+def k_close(case: Case, ratios: tuple[float, ...]) -> tuple[list[dict], list[Check]]:
+    """Every K-nearest method on maps of P = ratio·K caustic photons (the first paths of the
+    M map) and of K − 1: rows {scene, method, k, ratio, photons, rel_rmse}, the must-hold
+    checks and, per method, a finding on its worst RMSE against estimating black."""
+    base = case.photons_at_m()
+    black = case.black_rmse()
+    rows, checks = [], []
+    for method, estimator in estimators(case, M).items():
+        if needed_k(estimator) == 1:
+            continue
+        probes, held = k_close_probes(f"{case.name} {method}", estimator, case.points, base, ratios)
+        mine = [
+            {"scene": case.name, "method": method, "k": r["k"], "ratio": r["ratio"],
+             "photons": r["photons"], "rel_rmse": caustic_error(case, r["estimate"]) / black}
+            for r in probes
+            if r["estimate"] is not None
+        ]  # fmt: skip
+        checks += held
+        if mine:
+            worst = max(r["rel_rmse"] for r in mine)
+            subject = f"{case.name} {method}, P = K … {mine[-1]['ratio']:g}·K"
+            checks.append(finding(subject, "worst " + than_black(worst)))
+        rows += mine
+    return rows, checks
 
 
 def plot_k_close(rows: list[dict], path: Path) -> None:
@@ -189,7 +188,7 @@ def crossing_mask(case: Case, k: int = 50) -> np.ndarray:
     hit = np.flatnonzero(case.points.hit)
     out = np.zeros(len(case.points), bool)
     position, normal = case.points.position[hit], case.points.normal[hit]
-    for rows, nb in nearest(photon_map, position, normal, k):
+    for rows, nb in PhotonIndex(photon_map).nearest(position, normal, k):
         index = np.minimum(nb.index, len(photon_map) - 1)
         offset = photon_map.position[index] - position[rows, None, :]
         height = np.abs(np.einsum("nkc,nc->nk", offset, normal[rows]))
@@ -224,29 +223,33 @@ def luminance_sum(rgb: np.ndarray) -> float:
     return float(np.asarray(rgb, np.float64).mean(axis=1).sum())
 
 
-def region_verdicts(rows: list[dict], what: str, rule: str) -> list[str]:
-    """Verdicts on a region study: 'best' says whether each DPM model is the best method in
-    the region (RMSE); 'bias' whether every method's relative bias there is within 20 %."""
+def region_checks(
+    case: Case, estimates: dict[str, np.ndarray], mask: np.ndarray, what: str
+) -> list[Check]:
+    """Must hold, per method: its estimate at M is sound inside the region (mask (N,) bool)."""
+    subject = f"{case.name} {what} ({int((case.points.hit & mask).sum())} px)"
+    return [
+        must(f"{subject}, {method}", problems(estimate, case.points, mask), "finite, non-negative")
+        for method, estimate in estimates.items()
+    ]
+
+
+def region_findings(rows: list[dict], what: str, rule: str) -> list[Check]:
+    """Findings of a region study: 'best', each method's RMSE in the region against the best
+    method's; 'bias', each method's relative bias there, within ±BIAS_LIMIT or not."""
     out = []
     for scene in dict.fromkeys(r["scene"] for r in rows):
         mine = [r for r in rows if r["scene"] == scene]
         best = min(mine, key=lambda r: r["rmse_in"])
         for r in mine:
-            if rule == "best" and r["method"].startswith("DPM"):
+            subject = f"{scene} {what} ({r['points']} px), {r['method']}"
+            if rule == "best":
                 ratio = r["rmse_in"] / best["rmse_in"]
-                ok = r is best
-                out.append(
-                    f"{scene} {what} ({r['points']} px), {r['method']}: "
-                    + verdict(
-                        ok, f"RMSE {r['rmse_in']:.4f}, {ratio:.2f}× the best ({best['method']})"
-                    )
-                )
-            if rule == "bias":
-                ok = abs(r["bias_in"]) <= 0.2
-                out.append(
-                    f"{scene} {what} ({r['points']} px), {r['method']}: "
-                    + verdict(ok, f"bias {100 * r['bias_in']:+.1f} %")
-                )
+                text = f"RMSE {r['rmse_in']:.4f}, {ratio:.2f}× the best ({best['method']})"
+            else:
+                inside = "within" if abs(r["bias_in"]) <= BIAS_LIMIT else "beyond"
+                text = f"bias {100 * r['bias_in']:+.1f} % ({inside} ±{100 * BIAS_LIMIT:g} %)"
+            out.append(finding(subject, text))
     return out
 
 

@@ -21,12 +21,12 @@ import numpy as np  # noqa: E402
 from accuracy import colour  # noqa: E402
 from cases import Case, estimators, photons  # noqa: E402
 
+from common import M  # noqa: E402
 from dpm.camera import Camera  # noqa: E402
-from dpm.density import make_estimator  # noqa: E402
 from dpm.density.base import luminance  # noqa: E402
+from dpm.methods import make_estimator  # noqa: E402
 from dpm.metrics import dssim  # noqa: E402
 from dpm.tracer import trace_visible_points  # noqa: E402
-from estimator_table import M  # noqa: E402
 
 
 def orbit(camera: Camera, frames: int, degrees: float) -> list[Camera]:

@@ -4,18 +4,18 @@ side by side with Embree (embreex) on the same rays; the ratio is printed at the
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numba
 import numpy as np
 import pytest
 import trimesh
 
-from conftest import RESULTS, median_seconds
+from common import SCENES
+from conftest import BVH_ROWS, median_seconds
 from dpm import load_scene
 from dpm.tracer import build_bvh, intersect
 
-SCENES = sorted((Path(__file__).parents[1] / "examples" / "scenes").glob("*.obj"))
+EXAMPLES = sorted(SCENES.glob("*.obj"))
 N_RAYS = {"sphere82k": 1_000_000}
 DEFAULT_RAYS = 500_000
 
@@ -24,7 +24,7 @@ def load_triangles(name: str) -> np.ndarray:
     """(T, 3, 3) float32 triangles of an example scene, or the 81,920-triangle icosphere."""
     if name == "sphere82k":
         return trimesh.creation.icosphere(subdivisions=6).triangles.astype(np.float32)
-    return load_scene(next(p for p in SCENES if p.stem == name)).triangles
+    return load_scene(next(p for p in EXAMPLES if p.stem == name)).triangles
 
 
 def incoherent_rays(tri: np.ndarray, n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -37,7 +37,7 @@ def incoherent_rays(tri: np.ndarray, n: int, seed: int = 0) -> tuple[np.ndarray,
     return o, d
 
 
-NAMES = [p.stem for p in SCENES] + ["sphere82k"]
+NAMES = [p.stem for p in EXAMPLES] + ["sphere82k"]
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -58,8 +58,8 @@ def test_dpm_bvh(benchmark, name: str) -> None:
     finally:
         numba.set_num_threads(before)
     common = {"scene": name, "triangles": len(tri), "rays": len(o), "build_s": build_s}
-    RESULTS.append({**common, "engine": "dpm", "trace_s": trace_s})
-    RESULTS.append({**common, "engine": "dpm-1thread", "trace_s": one_s})
+    BVH_ROWS.append({**common, "engine": "dpm", "trace_s": trace_s})
+    BVH_ROWS.append({**common, "engine": "dpm-1thread", "trace_s": one_s})
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -82,7 +82,7 @@ def test_embree_bvh(benchmark, name: str) -> None:
     assert agree > 0.9999, f"hit/miss agreement with Embree only {agree:.6f}"
     both = (hits["primID"] >= 0) & (idx >= 0)
     np.testing.assert_allclose(hits["tfar"][both], t[both], rtol=1e-4, atol=1e-6)
-    RESULTS.append(
+    BVH_ROWS.append(
         {"scene": name, "triangles": len(tri), "rays": len(o), "build_s": build_s,
          "engine": "embree", "trace_s": trace_s}
     )  # fmt: skip

@@ -7,15 +7,25 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
+import tempfile
 import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from dpm import __version__
 from dpm.errors import InputError
 from dpm.io import write_image, write_json
-from dpm.render import COMPONENTS, METHODS, RenderOptions, render
+from dpm.options import (
+    COMPONENTS,
+    RenderOptions,
+    cli_fields,
+    default_text,
+    flag,
+    scoped_users,
+)
+from dpm.render import render
 from dpm.scene import load_scene
+from dpm.stopwatch import Stopwatch
 
 
 class _Parser(argparse.ArgumentParser):
@@ -47,9 +57,14 @@ def _run(prog: str, body: Callable[[], None]) -> int:
 
 
 def _render_parser() -> _Parser:
+    """dpm-render's parser: the outputs, then one flag per RenderOptions field."""
+    from dpm.methods import METHODS  # the registry names the methods
+
     p = _Parser(
         prog="dpm-render",
-        description="Render an OBJ scene (with its MTL and optional TOML sidecar).",
+        description="Render an OBJ scene (with its MTL and optional TOML sidecar). Flags "
+        "override the sidecar's [render] table.",
+        epilog="methods: " + "; ".join(f"{n}: {c.summary}" for n, c in METHODS.items()),
     )
     p.add_argument("scene", type=Path, help="scene .obj file")
     p.add_argument(
@@ -57,39 +72,22 @@ def _render_parser() -> _Parser:
         help="image to write: .exr (linear) or .png (sRGB); repeat for both "
         "(default: SCENE.exr and SCENE.png in the current folder)",
     )  # fmt: skip
-    p.add_argument("--method", choices=METHODS, help="rendering method (default: hybrid)")
-    p.add_argument("--spp", type=int, help="samples per pixel")
-    p.add_argument("--photons", type=int, help="emitted photon paths (photon methods)")
-    p.add_argument("--k", type=int, help="nearest photons per estimate (pm, dpm)")
-    p.add_argument(
-        "--radius", type=float, help="initial gather radius, scene units (ppm/appm/sppm)"
-    )
-    p.add_argument(
-        "--photons-per-pass", type=int, help="emitted photon paths per pass (ppm/appm/sppm)"
-    )
-    p.add_argument(
-        "--checkpoint", type=Path, metavar="FILE.npz",
-        help="ppm/appm: save statistics here as it goes and resume from it",
-    )  # fmt: skip
-    p.add_argument(
-        "--weights", type=Path, metavar="FILE.msgpack",
-        help="dpm, hybrid: weights from dpm-train (default: the shipped model for --k)",
-    )  # fmt: skip
-    p.add_argument(
-        "--caustic-spp", type=int, metavar="N",
-        help="photon methods: estimate caustics at the first N samples per pixel only "
-        "(default: all; hybrid: 1)",
-    )  # fmt: skip
-    p.add_argument(
-        "--denoise", action=argparse.BooleanOptionalAction,
-        help="Open Image Denoise with albedo and normal images (default: on for hybrid only)",
-    )  # fmt: skip
-    p.add_argument("--seed", type=int, help="random seed (same seed, same image)")
-    p.add_argument("--width", type=int, help="image width in pixels (overrides the scene)")
-    p.add_argument("--height", type=int, help="image height in pixels (overrides the scene)")
-    p.add_argument("--component", choices=COMPONENTS, help="full image or caustics only")
+    choices = {"method": list(METHODS), "component": list(COMPONENTS)}
+    for f in cli_fields():
+        kind = str(f.type).split(" |")[0]
+        help = f"{f.metadata['help']} (default: {default_text(f)})"
+        if f.metadata["scoped"]:
+            help += "; " + ", ".join(scoped_users(f.name)) + " only"
+        if kind == "bool":
+            p.add_argument(flag(f.name), action=argparse.BooleanOptionalAction, help=help)
+            continue
+        p.add_argument(
+            flag(f.name), type={"int": int, "float": float, "str": str, "Path": Path}[kind],
+            choices=choices.get(f.name), metavar=f.metadata.get("metavar"), help=help,
+        )  # fmt: skip
     p.add_argument("--stats", type=Path, metavar="FILE.json", help="write timings and counts")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     return p
 
 
@@ -115,6 +113,45 @@ def timing_summary(seconds: dict[str, float]) -> str:
     return ", ".join(parts + [f"total {sum(seconds.values()):.2f}s"])
 
 
+def render_options(args: argparse.Namespace, sidecar: dict) -> RenderOptions:
+    """RenderOptions from the flags over the sidecar's [render] defaults; a sidecar value of a
+    scoped option that the chosen method does not read is passed over (it is a default for
+    the methods that read it), while such a flag is an error (`validate`)."""
+    options = RenderOptions()
+    options.method = args.method or sidecar.get("method", options.method)
+    users = options.method_class().options
+    flags = cli_fields()
+    # e.g. a weight file knows its K: --weights sets aside the sidecar's k
+    aside = {
+        n for f in flags if getattr(args, f.name) is not None for n in f.metadata["supersedes"]
+    }
+    for f in flags:
+        if (
+            f.name in sidecar
+            and f.name not in aside
+            and (not f.metadata["scoped"] or f.name in users)
+        ):
+            setattr(options, f.name, sidecar[f.name])
+        if getattr(args, f.name) is not None:
+            setattr(options, f.name, getattr(args, f.name))
+    options.progress = not args.quiet and sys.stderr.isatty()
+    return options
+
+
+def check_writable(path: Path) -> None:
+    """Raise InputError unless a file can be written at `path` (checked before rendering, so
+    that a bad output path never costs a render)."""
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder, not a file name")
+    if not path.resolve().parent.is_dir():
+        raise InputError(f"{path}: output folder does not exist")
+    try:
+        with tempfile.TemporaryFile(dir=path.resolve().parent):
+            pass
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write there ({exc.strerror or exc})") from None
+
+
 def render_main(argv: Sequence[str] | None = None) -> int:
     """`dpm-render`: load a scene, render it, write the image (and stats); returns exit status."""
     args = _render_parser().parse_args(argv)
@@ -124,27 +161,22 @@ def render_main(argv: Sequence[str] | None = None) -> int:
         for output in outputs:
             if output.suffix.lower() not in (".png", ".exr"):
                 raise InputError(f"{output}: output must end in .png or .exr")
-        for path in (*outputs, args.stats, args.checkpoint):
-            if path is not None and not path.resolve().parent.is_dir():
-                raise InputError(f"{path}: output folder does not exist")
-        start = time.perf_counter()
-        scene = load_scene(args.scene)
-        load_seconds = time.perf_counter() - start
-        options = RenderOptions()
-        for key, value in scene.render_defaults.items():
-            if hasattr(options, key):
-                setattr(options, key, value)
-        keys = ("method", "spp", "photons", "k", "seed", "width", "height", "component", "denoise")
-        for key in keys + ("radius", "photons_per_pass", "checkpoint", "weights", "caustic_spp"):
-            if getattr(args, key) is not None:
-                setattr(options, key, getattr(args, key))
-        options.progress = not args.quiet and sys.stderr.isatty()
+        for path in (*outputs, args.stats):
+            if path is not None:
+                check_writable(path)
+        if args.checkpoint is not None and not args.checkpoint.exists():
+            check_writable(args.checkpoint)
+        watch = Stopwatch()
+        with watch("load"):
+            scene = load_scene(args.scene)
+        options = render_options(args, scene.render_defaults)
         result = render(scene, options)  # validates the options first
-        result.stats["seconds"]["load"] = load_seconds
-        start = time.perf_counter()
-        for output in outputs:
-            write_image(output, result.image)
-        result.stats["seconds"]["write"] = time.perf_counter() - start
+        seconds = result.stats["seconds"]
+        seconds.update(watch.seconds)
+        with watch("write"):
+            for output in outputs:
+                write_image(output, result.image)
+        seconds["write"] = watch.get("write")
         result.stats["scene"] = str(args.scene)
         result.stats["output"] = [str(o) for o in outputs]
         if args.stats is not None:
@@ -152,7 +184,7 @@ def render_main(argv: Sequence[str] | None = None) -> int:
         if not args.quiet:
             print(f"wrote {', '.join(map(str, outputs))} "
                   f"({result.stats['width']}x{result.stats['height']}): "
-                  + timing_summary(result.stats["seconds"]))  # fmt: skip
+                  + timing_summary(seconds))  # fmt: skip
 
     return _run("dpm-render", body)
 
@@ -162,10 +194,12 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     p = _Parser(prog="dpm-train", description="Train a DPM kernel-prediction network.")
     p.add_argument("--config", type=Path, required=True, help="training config (.toml)")
     p.add_argument("--quiet", action="store_true", help="no progress bars or summary")
+    p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     args = p.parse_args(argv)
 
     def body() -> None:
-        from dpm.nn.train import load_config, train  # imports JAX: only when training
+        from dpm.nn.config import load_config  # imports JAX: only when training
+        from dpm.nn.train import train
 
         config = load_config(args.config)
         _, rows = train(config, progress=not args.quiet and sys.stderr.isatty())

@@ -20,21 +20,10 @@ import numpy as np
 from dpm.camera import Camera, framing_camera, make_camera
 from dpm.errors import InputError
 from dpm.obj import MtlEntry, read_mtl, read_obj
+from dpm.options import sidecar_types
 
 DIFFUSE, MIRROR, DIELECTRIC = 0, 1, 2
 KIND_NAMES = ("diffuse", "mirror", "dielectric")
-
-# `[render]` keys a sidecar may set, with their types; dpm-render flags override them.
-RENDER_KEYS: dict[str, type] = {
-    "method": str,
-    "spp": int,
-    "photons": int,
-    "k": int,
-    "seed": int,
-    "radius": float,
-    "photons_per_pass": int,
-    "component": str,
-}
 
 
 @dataclass(frozen=True)
@@ -210,8 +199,9 @@ def _read_sidecar(path: Path, lo: np.ndarray, hi: np.ndarray) -> tuple[Camera, d
     render = data.get("render", {})
     if not isinstance(render, dict):
         raise InputError(f"{path}: [render] must be a table")
+    kinds = sidecar_types()  # the keys dpm-render's options allow, with their types
     for key, value in render.items():
-        want = RENDER_KEYS.get(key)
+        want = kinds.get(key)
         if want is None:
             raise InputError(f"{path}: [render] has unknown key '{key}'")
         ok = isinstance(value, want) and not isinstance(value, bool)

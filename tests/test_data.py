@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +11,7 @@ import trimesh
 
 from dpm import load_scene
 from dpm.data.builder import write_scene
-from dpm.data.dataset import DataConfig, build, load_shard, read_manifest
+from dpm.data.dataset import DataConfig, build, load_shard, read_manifest, shard_sizes
 from dpm.data.procedural import random_scene
 from dpm.errors import InputError
 from dpm.scene import DIELECTRIC, DIFFUSE
@@ -59,11 +59,12 @@ def test_a_build_resumes_and_refuses_other_settings(tmp_path: Path) -> None:
     assert [e["index"] for e in more["shards"]] == [0, 1, 2]
     assert (out / "shards" / "scene00000.npz").read_bytes() == shard0  # not remade
     assert read_manifest(out) == more
-    arrays = load_shard(out, more["shards"][2], (20_000, 40_000))
-    n = more["shards"][2]["points"]
-    assert arrays["position"].shape == arrays["radiance"].shape == (n, 3)
-    assert len(arrays["40000/flux"]) == more["shards"][2]["caustic_photons"]["40000"]
-    assert np.all(arrays["radiance"] >= 0) and arrays["radiance"].max() > 0
+    shard = load_shard(out, more["shards"][2], (20_000, 40_000))
+    n, photons = shard_sizes(more["shards"][2], 40_000)
+    assert shard.position.shape == shard.radiance.shape == (n, 3)
+    assert len(shard.photons[40_000]) == len(shard.photons[40_000].flux) == photons
+    assert shard.photons[40_000].n_paths == 40_000 and shard.photons[40_000].caustic.all()
+    assert np.all(shard.radiance >= 0) and shard.radiance.max() > 0
     with pytest.raises(InputError, match="other \\[data\\] settings"):
         build(replace(tiny(out, 3), reference_paths=1_000_000), progress=False)
     assert sorted(p.name for p in (out / "shards").iterdir()) == [
@@ -76,6 +77,9 @@ def test_parallel_build_equals_serial(tmp_path: Path) -> None:
     for a, b in zip(serial["shards"], parallel["shards"], strict=True):
         x = load_shard(tmp_path / "one", a, (20_000, 40_000))
         y = load_shard(tmp_path / "two", b, (20_000, 40_000))
-        assert x.keys() == y.keys()
-        for key in x:
-            np.testing.assert_array_equal(x[key], y[key], err_msg=key)
+        assert x.photons.keys() == y.photons.keys() == {20_000, 40_000}
+        pairs = [(x, y)] + [(x.photons[budget], y.photons[budget]) for budget in x.photons]
+        for u, v in pairs:
+            for f in fields(u):
+                if f.name != "photons":  # the photon sets: compared as pairs of their own
+                    np.testing.assert_array_equal(getattr(u, f.name), getattr(v, f.name), f.name)

@@ -7,12 +7,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dpm import load_scene
-from dpm.density import APPM, PM, PPM, SPPM, gather
+from dpm import load_scene, stopwatch
+from dpm.density import APPM, PM, PPM, gather
 from dpm.density.progressive import run_passes
 from dpm.density.tuning import best, rescore, tune_widening
 from dpm.errors import InputError
+from dpm.methods.cppm import CPPM
+from dpm.methods.sppm import sppm_caustics
 from dpm.metrics import rmse
+from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap, VisiblePoints, build_bvh, trace_photons, trace_visible_points
 
 EXAMPLES = Path(__file__).parent.parent / "examples" / "scenes"
@@ -70,8 +73,9 @@ def relative_error(points: VisiblePoints, radiance: np.ndarray) -> float:
         lambda n: PM(k=int(2 * n**0.5), kernel="cone"),
         lambda n: PPM(radius=0.08, photons_per_pass=n // 20),
         lambda n: APPM(radius=0.15, photons_per_pass=n // 20),
+        lambda n: CPPM(radius=0.08, photons_per_pass=n // 20),
     ],
-    ids=["pm", "pm-cone", "ppm", "appm"],
+    ids=["pm", "pm-cone", "ppm", "appm", "cppm"],
 )
 def test_estimators_recover_a_known_density(make) -> None:
     points = plane_points()
@@ -79,6 +83,47 @@ def test_estimators_recover_a_known_density(make) -> None:
               (10_000, 100_000, 1_000_000)]  # fmt: skip
     assert errors[0] > errors[1] > errors[2], errors
     assert errors[2] < 0.05, errors
+
+
+def uniform_photons(n: int, seed: int) -> PhotonMap:
+    """n photons of total flux 1 W spread uniformly over the unit square of z = 0."""
+    photons = plane_photons(n, seed)
+    xy = np.random.default_rng(seed).random((n, 2)).astype(np.float32)
+    photons.position[:, :2] = xy
+    return photons
+
+
+def striped_photons(n: int, seed: int) -> PhotonMap:
+    """n photons of total flux 1 W on the unit square of z = 0, 9× denser on stripes 0.1 wide
+    (every other): a disc of radius 0.05 almost always holds an edge."""
+    photons = plane_photons(n, seed)
+    rng = np.random.default_rng(seed)
+    bright = rng.random(n) < 0.9
+    x = (rng.integers(0, 5, n) * 2 + ~bright + rng.random(n)) / 10
+    photons.position[:, 0], photons.position[:, 1] = x, rng.random(n)
+    return photons
+
+
+def test_cppm_keeps_its_radius_where_the_density_is_flat() -> None:
+    """On a uniform density a disc's average is exact, so CPPM should keep (most of) its
+    radius and beat PPM, which shrinks anyway; where an edge crosses the disc it must shrink."""
+    points = plane_points()
+    exact = np.full((len(points), 3), 1 / np.pi)
+    index = gather.PointIndex(points.position, points.normal)
+    for seed in (1, 2):
+        photons = uniform_photons(200_000, seed)
+        cppm = CPPM(radius=0.05, photons_per_pass=10_000)
+        ppm = PPM(radius=0.05, photons_per_pass=10_000)
+        assert rmse(cppm.estimate(points, photons), exact) < 0.8 * rmse(
+            ppm.estimate(points, photons), exact
+        )  # measured: 0.66×
+        flat, varying = cppm.start(len(points)), cppm.start(len(points))
+        for part in photons.split(10_000):
+            flat.add(index, part)
+        for part in striped_photons(200_000, seed).split(10_000):
+            varying.add(index, part)
+        assert np.median(flat.radius) > 0.9 * 0.05  # most discs kept their radius
+        assert np.median(varying.radius) < 0.8 * np.median(flat.radius)
 
 
 def test_photons_from_the_other_side_are_not_counted() -> None:
@@ -115,8 +160,8 @@ def test_gathering_matches_brute_force_and_chunking(monkeypatch) -> None:
     agree = photons.normal[:, 2] > 0
     monkeypatch.setattr(gather, "POINTS_PER_CHUNK", 37)
     monkeypatch.setattr(gather, "PHOTONS_PER_CHUNK", 101)
-    rows = np.vstack([nb.index for _, nb in gather.nearest(photons, points, normal, 10)])
-    valid = np.vstack([nb.valid for _, nb in gather.nearest(photons, points, normal, 10)])
+    chunks = [nb for _, nb in gather.PhotonIndex(photons).nearest(points, normal, 10)]
+    rows, valid = np.vstack([nb.index for nb in chunks]), np.vstack([nb.valid for nb in chunks])
     np.testing.assert_array_equal(rows, np.argsort(d, axis=1, kind="stable")[:, :10])
     np.testing.assert_array_equal(valid, agree[rows])
     radius = rng.uniform(0.02, 0.2, 200)
@@ -126,14 +171,32 @@ def test_gathering_matches_brute_force_and_chunking(monkeypatch) -> None:
     assert found == expected and len(pairs.point) == len(found)
 
 
-def test_photon_tree_is_reused_for_one_map_only() -> None:
+def test_photon_index_answers_from_its_own_map_and_times_gathering() -> None:
     a, b = plane_photons(500, 1), plane_photons(500, 2)
-    assert gather.photon_tree(a) is gather.photon_tree(a)  # a render's row blocks share it
     point, normal = np.float32([[0.5, 0.5, 0.0]]), np.float32([[0, 0, 1]])
-    for photons in (a, b, a):  # switching maps never answers from the other map's tree
+    watch = Stopwatch()
+    index = {id(m): gather.PhotonIndex(m, watch) for m in (a, b)}
+    for photons in (a, b, a):  # each index answers from its own map's tree
         d = np.linalg.norm(photons.position - point, axis=1)
-        nb = next(gather.nearest(photons, point, normal, 5))[1]
+        nb = next(index[id(photons)].nearest(point, normal, 5, watch))[1]
         np.testing.assert_array_equal(nb.index[0], np.argsort(d, kind="stable")[:5])
+    assert set(watch.seconds) == {"gather"} and watch.seconds["gather"] > 0
+    # an estimator given the index uses it, and gives what it gives from the bare map
+    np.testing.assert_array_equal(
+        PM(k=5).estimate(plane_points(4), index[id(a)]), PM(k=5).estimate(plane_points(4), a)
+    )
+
+
+def test_stopwatch_counts_nested_stages_once(monkeypatch) -> None:
+    clock = iter([0.0, 2.0, 5.0, 6.0, 10.0, 11.0])  # a fake perf_counter: no wall clock
+    monkeypatch.setattr(stopwatch.time, "perf_counter", lambda: next(clock))
+    watch = Stopwatch()
+    with watch("outer"):  # 0 .. 6, of which 2 .. 5 inside "inner"
+        with watch("inner"):
+            pass
+    with watch("inner"):  # 10 .. 11
+        pass
+    assert watch.seconds == {"inner": 4.0, "outer": 3.0} and watch.total() == 7.0
 
 
 @pytest.fixture(scope="module")
@@ -155,7 +218,7 @@ def test_ppm_error_against_a_ten_times_longer_run_falls_with_the_budget(egg) -> 
     assert errors[0] > errors[1] > errors[2] > 0, errors
 
 
-@pytest.mark.parametrize("cls", [PPM, APPM])
+@pytest.mark.parametrize("cls", [PPM, APPM, CPPM])
 def test_a_resumed_run_ends_bit_identical(cls, egg, tmp_path: Path) -> None:
     scene, bvh, points = egg
     estimator = cls(radius=0.05, photons_per_pass=50_000)
@@ -197,9 +260,7 @@ def test_guided_emission_changes_no_expectation(egg) -> None:
 def test_sppm_and_ppm_see_the_same_caustics(egg) -> None:
     scene, bvh, _ = egg
     camera = scene.camera.with_resolution(32, 32)
-    sppm, found = SPPM(radius=0.05, photons_per_pass=50_000).render(
-        scene, bvh, camera, 1_000_000, seed=7
-    )
+    sppm, found = sppm_caustics(scene, bvh, camera, 1_000_000, 7, 0.05, 50_000)
     assert found > 0 and sppm.shape == (32, 32, 3)
     points = trace_visible_points(scene, bvh, camera, 20, 8, (0, 32))
     photons = trace_photons(scene, bvh, 1_000_000, seed=9, caustic_only=True)

@@ -17,8 +17,8 @@ from dpm.density import PPM
 from dpm.density.progressive import run_passes
 from dpm.render import RenderOptions, render
 from dpm.tracer import build_bvh, trace_visible_points
-from mitsuba_scene import render_mitsuba
-from noise import block_z, relative_sigma_of_mean_difference
+from dpm.validation.mitsuba import render_mitsuba
+from dpm.validation.noise import block_z, relative_sigma_of_mean_difference
 
 EXAMPLES = Path(__file__).parent.parent / "examples" / "scenes"
 

@@ -13,24 +13,16 @@ import numpy as np
 import pytest
 
 from dpm.cli import render_main, train_main
+from dpm.data.dataset import DataConfig
 from dpm.density import PM
 from dpm.errors import InputError
+from dpm.nn.config import Config, ModelConfig, TrainConfig, load_config
 from dpm.nn.features import flux_map, flux_unmap
 from dpm.nn.infer import Batch, make_predict, neighbourhoods, point_radiance, predict_points
+from dpm.nn.losses import loss_value, mu_law
 from dpm.nn.model import make_model
-from dpm.nn.train import (
-    Config,
-    DataConfig,
-    ModelConfig,
-    Sampler,
-    TrainConfig,
-    init_params,
-    load_config,
-    loss_value,
-    make_steps,
-    mu_law,
-    train,
-)
+from dpm.nn.sampler import Sampler
+from dpm.nn.train import init_params, make_steps, train
 from dpm.nn.weights import Weights, load_weights, save_weights
 from dpm.tracer import PhotonMap, VisiblePoints
 
@@ -208,7 +200,7 @@ def test_one_training_step_lowers_the_loss_on_a_fixed_batch(one_point: Batch) ->
     target = np.full((n, 3), 0.05, np.float32)
     for architecture in ("dpm", "dpm-l", "direct"):
         model = make_model(architecture, 8)
-        optimiser, loss, step = make_steps(model, 1e-3)
+        optimiser, loss, step = make_steps(model, 1e-3, "mu-law", balance=False)
         params = init_params(model, K, 0)
         before = float(loss(params, b, target))
         params, _, value = step(params, optimiser.init(params), b, target)
@@ -362,7 +354,41 @@ def test_committed_configs_load() -> None:
         config = load_config(path)
         assert isinstance(config.data, DataConfig) and isinstance(config.model, ModelConfig)
         assert isinstance(config.train, TrainConfig)
-        assert tomllib.loads(path.read_text())["data"]["out"].startswith("runs/")
+        raw = tomllib.loads(path.read_text())
+        assert raw["data"]["out"].startswith("runs/")
+        assert {"loss", "balance"} <= raw["train"].keys(), path  # named, not left to defaults
+        assert "relative to the directory you run dpm-train from" in path.read_text(), path
+
+
+def test_a_config_without_a_loss_gets_the_recommended_one(tmp_path: Path) -> None:
+    path = tmp_path / "bare.toml"
+    path.write_text('[data]\nout = "d"\n')
+    config = load_config(path)
+    assert (config.train.loss, config.train.balance) == ("mse+relmse", True)
+
+
+def test_relative_folders_are_relative_to_the_working_directory(
+    tiny: Config, tmp_path: Path, monkeypatch, capsys
+) -> None:
+    """Not to the config's folder: `out`s are kept as written, and train says where they lie."""
+    here = Path(tiny.data.out).parent  # holds the tiny set, built by the other tests
+    monkeypatch.chdir(here)
+    text = (ROOT / "configs" / "tiny.toml").read_text()
+    text = text.replace('"runs/data-tiny"', f'"{Path(tiny.data.out).name}"')
+    text = text.replace('"runs/tiny"', '"relative-run"').replace("steps = 40", "steps = 2")
+    path = tmp_path / "relative.toml"
+    path.write_text(text)
+    config = load_config(path)
+    assert (config.data.out, config.train.out) == (Path(tiny.data.out).name, "relative-run")
+    capsys.readouterr()
+    train(config, progress=True)
+    err = capsys.readouterr().err
+    assert (here / "relative-run" / "model.msgpack").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["relative.toml"]
+    first = err.lstrip().splitlines()[0]
+    assert str(Path(tiny.data.out).resolve()) in first, err
+    assert str((here / "relative-run").resolve()) in first, err
+    assert "relative to the directory dpm-train runs from" in first, err
 
 
 def test_point_radiance_is_pure(one_point: Batch) -> None:

@@ -19,7 +19,7 @@ from conftest import FLOOR_AND_LIGHT_MTL, write_scene
 from dpm import load_scene
 from dpm.render import RenderOptions, render
 from dpm.tracer import build_bvh, shade, trace_photons, trace_visible_points
-from noise import block_z
+from dpm.validation.noise import block_z
 
 EXAMPLES = Path(__file__).parent.parent / "examples" / "scenes"
 RHO, LE, SIDE, HEIGHT = 0.5, 10.0, 0.2, 1.0

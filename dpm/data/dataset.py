@@ -7,8 +7,10 @@ Layout of `DataConfig.out`:
   normal, albedo), their ground-truth caustic radiance, and for each budget B the caustic
   photons of B emitted paths (`B/position`, `B/direction`, `B/flux`, `B/normal`);
 - `manifest.json`: the config and one entry per finished shard.
-A shard is written atomically, so a killed build resumes with the scenes it has; scenes are
-made in parallel worker processes, and each depends only on (seed, index).
+Only this module knows a shard's array names: `load_shard` reads one back as a `Shard`, and
+`shard_sizes` reads its counts from its manifest entry. A shard is written atomically, so a
+killed build resumes with the scenes it has; scenes are made in parallel worker processes,
+and each depends only on (seed, index).
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass
 from multiprocessing import get_context
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from tqdm import tqdm
@@ -28,8 +31,13 @@ from dpm.data.procedural import random_scene
 from dpm.errors import InputError
 from dpm.io import atomic
 
+if TYPE_CHECKING:
+    from dpm.tracer import PhotonMap
+
 MANIFEST = "manifest.json"
 GENERATOR = 2  # bump when dpm.data.procedural or the shard content changes: old sets are refused
+POINT_ARRAYS = ("position", "normal", "albedo", "radiance")  # a shard's per-point arrays
+PHOTON_ARRAYS = ("position", "direction", "flux", "normal")  # `B/name` for each budget B
 
 
 @dataclass(frozen=True)
@@ -54,6 +62,22 @@ class DataConfig:
         d["budgets"] = list(self.budgets)
         d["generator"] = GENERATOR
         return d
+
+
+@dataclass(frozen=True)
+class Shard:
+    """One scene's shard, read into memory: its P visible points and caustic photon sets."""
+
+    position: np.ndarray  # (P, 3) float32 world position of each visible point
+    normal: np.ndarray  # (P, 3) float32 unit surface normal
+    albedo: np.ndarray  # (P, 3) float32 diffuse albedo
+    radiance: np.ndarray  # (P, 3) float32 ground-truth caustic radiance, W/(m² sr)
+    photons: dict[int, PhotonMap]  # budget B → the caustic photons of B emitted paths
+
+
+def shard_sizes(entry: dict, budget: int) -> tuple[int, int]:
+    """(visible points, caustic photons at `budget`) of the shard of a manifest entry."""
+    return entry["points"], entry["caustic_photons"][str(budget)]
 
 
 def shard_name(index: int) -> str:
@@ -92,7 +116,7 @@ def make_shard(config: DataConfig, index: int) -> dict:
     for j, budget in enumerate(config.budgets):
         pm = trace_photons(scene, bvh, budget, seed=(config.seed * 7919 + index) * 16 + j,
                            caustic_only=True)  # fmt: skip
-        for name in ("position", "direction", "flux", "normal"):
+        for name in PHOTON_ARRAYS:
             arrays[f"{budget}/{name}"] = getattr(pm, name)
         photons[str(budget)] = len(pm)
     path = out / "shards" / f"{shard_name(index)}.npz"
@@ -162,14 +186,20 @@ def build(config: DataConfig, progress: bool = True) -> dict:
     return {**manifest, "shards": [e for e in manifest["shards"] if e["index"] < config.scenes]}
 
 
-def load_shard(out: Path, entry: dict, budgets: tuple[int, ...]) -> dict[str, np.ndarray]:
-    """All arrays of one shard (see the module docstring), read into memory."""
+def load_shard(out: Path, entry: dict, budgets: tuple[int, ...]) -> Shard:
+    """The shard of a manifest entry, read into memory with the photon sets of `budgets`."""
+    from dpm.tracer import PhotonMap
+
     path = Path(out) / entry["file"]
     try:
         with np.load(path) as f:
-            wanted = ["position", "normal", "albedo", "radiance"]
-            wanted += [f"{b}/{n}" for b in budgets for n in ("position", "direction", "flux",
-                                                              "normal")]  # fmt: skip
-            return {name: f[name] for name in wanted}
+            points = [f[name] for name in POINT_ARRAYS]
+            photons = {}
+            for b in budgets:
+                position, direction, flux, normal = (f[f"{b}/{n}"] for n in PHOTON_ARRAYS)
+                photons[b] = PhotonMap(position, direction, flux, normal,
+                                       np.ones(len(flux), bool), np.zeros(0, np.uint16),
+                                       np.zeros(0, np.int64), b)  # fmt: skip
     except Exception as e:  # OSError, KeyError, BadZipFile, zlib.error, ValueError alike
         raise InputError(f"{path}: unreadable training shard ({type(e).__name__})") from None
+    return Shard(*points, photons)

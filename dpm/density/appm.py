@@ -28,6 +28,7 @@ from dpm.density.kernels import (
 )
 from dpm.density.ppm import ALPHA, Progressive
 from dpm.density.progressive import Statistics
+from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap
 
 MIN_FRACTION = 1 / 16  # the smallest bandwidth a point may choose, as a fraction of h
@@ -41,10 +42,6 @@ class APPMState(Statistics):
     energy: np.ndarray  # (n, 3) float64 Σ paths_j · E_j of the per-pass estimates (W m⁻²)
     laplacian: np.ndarray  # (n,) float64 Σ_j ΔE_j, luminance (W m⁻⁴)
     second: np.ndarray  # (n,) float64 Σ_j g_j, density of squared path weights (W² m⁻²)
-    paths: int = 0  # emitted photon paths so far
-    passes: int = 0
-    alpha: float = ALPHA
-    photons: int = 0  # caustic photons those paths stored
 
     @classmethod
     def start(cls, n: int, radius: float, alpha: float = ALPHA) -> APPMState:
@@ -62,12 +59,12 @@ class APPMState(Statistics):
             r = r6 ** (1 / 6)
         return np.clip(np.nan_to_num(r, nan=h, posinf=h), MIN_FRACTION * h, h)
 
-    def add(self, index: PointIndex, photons: PhotonMap) -> None:
+    def add(self, index: PointIndex, photons: PhotonMap, watch: Stopwatch | None = None) -> None:
         """Gather one pass with each point's bandwidth and update the pilot statistics."""
         n, p = len(self.second), photons.n_paths
         r = self.bandwidth(self.paths + p)
         h = self.pilot
-        pairs = index.within(photons, h)
+        pairs = index.within(photons, h, watch)
         w = photons.flux[pairs.photon].astype(np.float64) * p  # per-path photon weights
         rp = r[pairs.point]
         k = biweight(pairs.distance / rp) / rp**2

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
+from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap, VisiblePoints
 
 
@@ -13,9 +14,12 @@ class Estimator(Protocol):
     """Caustic radiance at visible points from a photon map (scikit-learn style: parameters
     go to the constructor, data to `estimate`)."""
 
-    def estimate(self, points: VisiblePoints, photons: PhotonMap) -> np.ndarray:
+    def estimate(
+        self, points: VisiblePoints, photons: PhotonMap | Any, watch: Stopwatch | None = None
+    ) -> np.ndarray:
         """(N, 3) float32 caustic radiance leaving each visible point towards the camera
-        (W m⁻² sr⁻¹, before the camera-path throughput); 0 where points.hit is False."""
+        (W m⁻² sr⁻¹, before the camera-path throughput); 0 where points.hit is False.
+        `photons` may be a `PhotonIndex` over the map; stages count on `watch`."""
         ...
 
 

@@ -1,36 +1,30 @@
 """Gathering photons around visible points with scipy's cKDTree.
 
 Two directions, both chunked so that peak memory stays bounded:
-- `nearest`: a tree over the photons answers the K nearest photons of each point (PM, DPM);
-- `within`: a tree over the points answers, for each photon of a pass, the points whose
+- `PhotonIndex.nearest`: a tree over the photons, built once per photon map, answers the K
+  nearest photons of each point (PM, DPM);
+- `PointIndex.within`: a tree over the points answers, for each photon of a pass, the points whose
   radius reaches it (the progressive methods, whose points stay put while passes stream by).
 A photon counts only where its surface normal agrees with the point's (within 60°): photons on
-the far side of a thin wall or on a perpendicular wall belong to another surface.
+the far side of a thin wall or on a perpendicular wall belong to another surface. Building
+and querying count as the "gather" stage of the `Stopwatch` passed in.
 """
 
 from __future__ import annotations
 
-import time
-import weakref
 from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap
 
 NORMAL_COS = 0.5  # a photon counts when dot(photon normal, point normal) ≥ this
 POINTS_PER_CHUNK = 1 << 14  # K-nearest queries answered at once
 PHOTONS_PER_CHUNK = 1 << 16  # photons of a pass whose points are sought at once
-
-# Seconds spent in tree building and queries since the last reset, so that benchmarks can
-# report gathering apart from estimation (reset by assigning 0.0).
-seconds = 0.0
-
-# The last photon tree and a weak reference to the positions it was built from: a render asks
-# for the same map's neighbours once per block of rows, and rebuilding costs ~0.4 s per 1M.
-_last_tree: tuple[weakref.ref, cKDTree] | None = None
+GATHER = "gather"  # the stopwatch stage of tree building and queries
 
 
 @dataclass(frozen=True)
@@ -66,46 +60,41 @@ def take(values: np.ndarray, index: np.ndarray) -> np.ndarray:
     return out
 
 
-def photon_tree(photons: PhotonMap) -> cKDTree:
-    """A cKDTree over photons.position (P, 3), reused while the same position array is asked
-    for again (the map is frozen; its arrays are never written after tracing)."""
-    global _last_tree
-    if _last_tree is not None and _last_tree[0]() is photons.position:
-        return _last_tree[1]
-    tree = cKDTree(photons.position.astype(np.float64))
-    _last_tree = (weakref.ref(photons.position), tree)
-    return tree
+class PhotonIndex:
+    """A photon map and a cKDTree over its positions, built once per map and passed to every
+    query (a render's row blocks, a benchmark's repeated estimates)."""
+
+    def __init__(self, photons: PhotonMap, watch: Stopwatch | None = None) -> None:
+        self.photons = photons
+        with (watch or Stopwatch())(GATHER):
+            self.tree = cKDTree(photons.position.astype(np.float64)) if len(photons) else None
+
+    def __len__(self) -> int:
+        return len(self.photons)
+
+    def nearest(
+        self, position: np.ndarray, normal: np.ndarray, k: int, watch: Stopwatch | None = None
+    ) -> Iterator[tuple[slice, Neighbourhoods]]:
+        """The k nearest photons of points (N, 3) with unit normals (N, 3), a chunk of points
+        at a time (the map must hold photons); query time counts as the watch's "gather"."""
+        watch = watch or Stopwatch()
+        for first in range(0, len(position), POINTS_PER_CHUNK):
+            with watch(GATHER):
+                rows = slice(first, min(first + POINTS_PER_CHUNK, len(position)))
+                dist, index = self.tree.query(position[rows].astype(np.float64), k=k, workers=-1)
+                dist, index = dist.reshape(-1, k), index.reshape(-1, k)  # k = 1 drops the axis
+                # a missing neighbour's zero normal never agrees
+                valid = _agree(take(self.photons.normal, index), normal[rows, None, :])
+            yield rows, Neighbourhoods(index, dist, valid)
 
 
-def forget_tree() -> None:
-    """Drop the reused photon tree, so that a timed query pays for building its own."""
-    global _last_tree
-    _last_tree = None
+Photons = PhotonMap | PhotonIndex  # what an estimator's `estimate` takes: a map or its index
+Watch = Stopwatch | None  # the stopwatch an estimate's stages count on (None: not timed)
 
 
-def nearest(
-    photons: PhotonMap,
-    position: np.ndarray,
-    normal: np.ndarray,
-    k: int,
-    tree: cKDTree | None = None,
-) -> Iterator[tuple[slice, Neighbourhoods]]:
-    """The k nearest photons of points (N, 3) with normals (N, 3), a chunk of points at a time;
-    `tree` (a cKDTree over photons.position) saves rebuilding it for repeated queries."""
-    global seconds
-    start = time.perf_counter()
-    if tree is None:
-        tree = photon_tree(photons)
-    seconds += time.perf_counter() - start
-    for first in range(0, len(position), POINTS_PER_CHUNK):
-        start = time.perf_counter()
-        rows = slice(first, min(first + POINTS_PER_CHUNK, len(position)))
-        dist, index = tree.query(position[rows].astype(np.float64), k=k, workers=-1)
-        dist, index = dist.reshape(-1, k), index.reshape(-1, k)  # k = 1 drops the axis
-        # a missing neighbour's zero normal never agrees
-        valid = _agree(take(photons.normal, index), normal[rows, None, :])
-        seconds += time.perf_counter() - start
-        yield rows, Neighbourhoods(index, dist, valid)
+def photon_index(photons: Photons, watch: Watch = None) -> PhotonIndex:
+    """`photons` itself when it is already indexed, else a new PhotonIndex over it."""
+    return photons if isinstance(photons, PhotonIndex) else PhotonIndex(photons, watch)
 
 
 class PointIndex:
@@ -116,10 +105,15 @@ class PointIndex:
         self.normal = np.asarray(normal, np.float32)
         self.tree = cKDTree(self.position)
 
-    def within(self, photons: PhotonMap, radius: np.ndarray | float) -> Pairs:
-        """Pairs with distance < radius of the point: radius is (N,) per point or one value."""
-        global seconds
-        begin = time.perf_counter()
+    def within(
+        self, photons: PhotonMap, radius: np.ndarray | float, watch: Stopwatch | None = None
+    ) -> Pairs:
+        """Pairs with distance < radius of the point: radius is (N,) per point or one value;
+        the search counts as the watch's "gather"."""
+        with (watch or Stopwatch())(GATHER):
+            return self._within(photons, radius)
+
+    def _within(self, photons: PhotonMap, radius: np.ndarray | float) -> Pairs:
         radius = np.broadcast_to(np.asarray(radius, np.float64), (len(self.position),))
         reach = float(radius.max(initial=0.0))
         parts = []
@@ -141,5 +135,4 @@ class PointIndex:
             empty = np.zeros(0, np.int64)
             parts.append((empty, empty, np.zeros(0)))
         point, photon, dist = (np.concatenate(c) for c in zip(*parts, strict=True))
-        seconds += time.perf_counter() - begin
         return Pairs(point, photon, dist)

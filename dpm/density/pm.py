@@ -7,9 +7,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from dpm.density.base import reflected
-from dpm.density.gather import nearest, take
+from dpm.density.gather import PhotonIndex, Photons, Watch, photon_index, take
 from dpm.density.kernels import KERNELS
 from dpm.errors import InputError
+from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap, VisiblePoints
 
 
@@ -24,6 +25,17 @@ def check_k(k: int, photons: PhotonMap) -> None:
         )
 
 
+def k_nearest_start(
+    points: VisiblePoints, photons: Photons, k: int, watch: Watch
+) -> tuple[Stopwatch, PhotonIndex, np.ndarray]:
+    """What a K-nearest estimate starts from: its stopwatch, the map's index (k checked
+    against its photon count) and the (N, 3) float32 zero radiance of the N points."""
+    watch = watch or Stopwatch()
+    index = photon_index(photons, watch)
+    check_k(k, index.photons)
+    return watch, index, np.zeros((len(points), 3), np.float32)
+
+
 @dataclass(frozen=True)
 class PM:
     """Kernel density estimate over the k nearest photons; kernel 'uniform' or 'cone'."""
@@ -31,20 +43,21 @@ class PM:
     k: int = 50
     kernel: str = "uniform"
 
-    def estimate(self, points: VisiblePoints, photons: PhotonMap) -> np.ndarray:
-        """(N, 3) float32 caustic radiance leaving each visible point (0 where not hit)."""
+    def estimate(self, points: VisiblePoints, photons: Photons, watch: Watch = None) -> np.ndarray:
+        """(N, 3) float32 caustic radiance leaving each visible point (0 where not hit);
+        stages "gather" and "estimate" (the kernel sums) count on `watch`."""
         if self.kernel not in ("uniform", "cone"):
             raise InputError(f"unknown PM kernel '{self.kernel}'; use uniform or cone")
-        check_k(self.k, photons)
-        out = np.zeros((len(points), 3), np.float32)
-        if len(photons) == 0:
+        watch, index, out = k_nearest_start(points, photons, self.k, watch)
+        if len(index) == 0:
             return out
         kernel = KERNELS[self.kernel]
         hit = np.flatnonzero(points.hit)
-        for rows, nb in nearest(photons, points.position[hit], points.normal[hit], self.k):
-            r = np.maximum(nb.distance[:, -1:], 1e-30)  # bandwidth: the K-th nearest photon
-            weight = np.where(nb.valid, kernel(nb.distance / r) / r**2, 0.0)
-            flux = take(photons.flux, nb.index).astype(np.float64)
-            irradiance = np.einsum("nk,nkc->nc", weight, flux)
-            out[hit[rows]] = reflected(points.albedo[hit[rows]], irradiance)
+        with watch("estimate"):
+            for rows, nb in index.nearest(points.position[hit], points.normal[hit], self.k, watch):
+                r = np.maximum(nb.distance[:, -1:], 1e-30)  # bandwidth: the K-th nearest photon
+                weight = np.where(nb.valid, kernel(nb.distance / r) / r**2, 0.0)
+                flux = take(index.photons.flux, nb.index).astype(np.float64)
+                irradiance = np.einsum("nk,nkc->nc", weight, flux)
+                out[hit[rows]] = reflected(points.albedo[hit[rows]], irradiance)
         return out

@@ -12,12 +12,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dpm.density.gather import PointIndex
-from dpm.density.progressive import Statistics, estimate_in_passes
+from dpm.density.gather import Photons, PointIndex, Watch
+from dpm.density.progressive import ALPHA, Statistics, estimate_in_passes
 from dpm.errors import InputError
+from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap, VisiblePoints
-
-ALPHA = 0.7  # fraction of new photons kept each pass (the paper's and Hachisuka's choice)
 
 
 def check_progressive(radius: float, photons_per_pass: int, alpha: float) -> None:
@@ -37,19 +36,15 @@ class PPMState(Statistics):
     radius: np.ndarray  # (n,) float64 current radius R (scene units)
     count: np.ndarray  # (n,) float64 accumulated photon count N
     tau: np.ndarray  # (n, 3) float64 accumulated flux τ, per emitted path (W)
-    paths: int = 0  # emitted photon paths so far
-    passes: int = 0
-    alpha: float = ALPHA
-    photons: int = 0  # caustic photons those paths stored
 
     @classmethod
     def start(cls, n: int, radius: float, alpha: float = ALPHA) -> PPMState:
         """A state of n points with initial radius `radius` and nothing gathered."""
         return cls(np.full(n, float(radius)), np.zeros(n), np.zeros((n, 3)), alpha=alpha)
 
-    def add(self, index: PointIndex, photons: PhotonMap) -> None:
+    def add(self, index: PointIndex, photons: PhotonMap, watch: Stopwatch | None = None) -> None:
         """Gather one pass of photons (flux divided by its own n_paths) and shrink the radii."""
-        pairs = index.within(photons, self.radius)
+        pairs = index.within(photons, self.radius, watch)
         flux = photons.flux[pairs.photon].astype(np.float64) * photons.n_paths
         self.update(pairs.point, flux)
         self.paths += photons.n_paths
@@ -85,9 +80,10 @@ class Progressive:
         """Raise InputError for unusable parameters."""
         check_progressive(self.radius, self.photons_per_pass, self.alpha)
 
-    def estimate(self, points: VisiblePoints, photons: PhotonMap) -> np.ndarray:
-        """(N, 3) float32 caustic radiance leaving each visible point, passes of the map."""
-        return estimate_in_passes(self, points, photons)
+    def estimate(self, points: VisiblePoints, photons: Photons, watch: Watch = None) -> np.ndarray:
+        """(N, 3) float32 caustic radiance leaving each visible point, passes of the map;
+        stages "gather" and "estimate" count on `watch`."""
+        return estimate_in_passes(self, points, photons, watch)
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """Running a progressive estimator (PPM, APPM) pass by pass, with checkpoints.
 
 A progressive estimator has `start(n) -> state`, `check()` and `photons_per_pass`; its state
-has `add(index, pass_photons)`, `irradiance()` and, from `Statistics`, `arrays()` and
+has `add(index, pass_photons, watch)`, `irradiance()` and, from `Statistics`, `arrays()` and
 `from_arrays()`. Passes are consecutive slices of one photon stream
 (`trace_photons(first_path=…)`), so the statistics after pass j depend only on the seed, and a
 run resumed from a checkpoint ends bit-identical to one that never stopped.
@@ -12,7 +12,7 @@ from __future__ import annotations
 import hashlib
 import time
 import zipfile
-from dataclasses import fields
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -20,25 +20,42 @@ import numpy as np
 from tqdm import tqdm
 
 from dpm.density.base import reflected
-from dpm.density.gather import PointIndex
+from dpm.density.gather import PhotonIndex, PointIndex
 from dpm.errors import InputError
 from dpm.io import atomic
 from dpm.scene import Scene
+from dpm.stopwatch import Stopwatch
 from dpm.tracer import BVH, PhotonMap, VisiblePoints, trace_photons
 
+ALPHA = 0.7  # fraction of new photons kept each pass (the paper's and Hachisuka's choice)
 CHECKPOINT_SECONDS = 30.0  # a run writes its statistics at most this often (and at the end)
 
 
-def estimate_in_passes(estimator: Any, points: VisiblePoints, photons: PhotonMap) -> np.ndarray:
-    """(N, 3) float32 radiance at visible points from a photon map split into passes."""
+def pass_seed(seed: int, j: int) -> int:
+    """The seed of pass j (camera samples, a reference's half): independent of every other's."""
+    return int(np.random.SeedSequence([seed, j]).generate_state(1)[0])
+
+
+def estimate_in_passes(
+    estimator: Any,
+    points: VisiblePoints,
+    photons: PhotonMap | PhotonIndex,
+    watch: Stopwatch | None = None,
+) -> np.ndarray:
+    """(N, 3) float32 radiance at visible points from a photon map split into passes; stages
+    "gather" and "estimate" count on `watch`."""
     estimator.check()
+    watch = watch or Stopwatch()
+    if isinstance(photons, PhotonIndex):  # the progressive methods search from the points
+        photons = photons.photons
     out = np.zeros((len(points), 3), np.float32)
     hit = np.flatnonzero(points.hit)
-    index = PointIndex(points.position[hit], points.normal[hit])
-    state = estimator.start(len(hit))
-    for part in photons.split(estimator.photons_per_pass):
-        state.add(index, part)
-    out[hit] = reflected(points.albedo[hit], state.irradiance())
+    with watch("estimate"):
+        index = PointIndex(points.position[hit], points.normal[hit])
+        state = estimator.start(len(hit))
+        for part in photons.split(estimator.photons_per_pass):
+            state.add(index, part, watch)
+        out[hit] = reflected(points.albedo[hit], state.irradiance())
     return out
 
 
@@ -52,8 +69,15 @@ def fingerprint(
     return h.hexdigest()
 
 
+@dataclass(kw_only=True)
 class Statistics:
-    """Mixin for a dataclass of per-point statistics: its fields are the checkpoint's arrays."""
+    """Base of a dataclass of per-point statistics: its fields are the checkpoint's arrays;
+    these counters are every progressive run's."""
+
+    paths: int = 0  # emitted photon paths so far
+    passes: int = 0
+    alpha: float = ALPHA  # fraction of new photons kept each pass
+    photons: int = 0  # caustic photons those paths stored
 
     def arrays(self) -> dict[str, np.ndarray]:
         """Everything needed to resume: every field as a named array."""
@@ -99,15 +123,18 @@ def run_passes(
     guided: bool = False,
     progress: bool = False,
     stop_after: int | None = None,
+    watch: Stopwatch | None = None,
 ) -> tuple[np.ndarray, Any]:
     """Trace n_paths photon paths pass by pass into the estimator's statistics.
 
     Returns ((N, 3) float32 radiance at the visible points, final state). With `checkpoint`
     the statistics are saved every CHECKPOINT_SECONDS and at the end, and an existing file
     from the same run is resumed. `stop_after` ends after that many passes in total (as an
-    interruption would); `guided` aims emission at the specular surfaces (references).
+    interruption would); `guided` aims emission at the specular surfaces (references). Stages
+    "photons" (tracing), "gather" and "estimate" count on `watch`.
     """
     estimator.check()
+    watch = watch or Stopwatch()
     hit = np.flatnonzero(points.hit)
     index = PointIndex(points.position[hit], points.normal[hit])
     state = estimator.start(len(hit))
@@ -121,11 +148,13 @@ def run_passes(
     with tqdm(total=n_passes, initial=state.passes, unit="pass", disable=not progress) as bar:
         for j in range(state.passes, last):
             first = j * per_pass
-            photons = trace_photons(
-                scene, bvh, min(per_pass, n_paths - first), seed,
-                caustic_only=True, first_path=first, guided=guided,
-            )  # fmt: skip
-            state.add(index, photons)
+            with watch("photons"):
+                photons = trace_photons(
+                    scene, bvh, min(per_pass, n_paths - first), seed,
+                    caustic_only=True, first_path=first, guided=guided,
+                )  # fmt: skip
+            with watch("estimate"):
+                state.add(index, photons, watch)
             bar.update(1)
             if checkpoint is not None and time.monotonic() - saved > CHECKPOINT_SECONDS:
                 _save(checkpoint, key, state.arrays())

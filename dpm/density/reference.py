@@ -15,8 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from dpm.density.ppm import PPM
-from dpm.density.progressive import run_passes
-from dpm.density.sppm import pass_seed
+from dpm.density.progressive import pass_seed, run_passes
 from dpm.metrics import rmse
 from dpm.scene import Scene
 from dpm.tracer import BVH, VisiblePoints

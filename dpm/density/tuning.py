@@ -11,12 +11,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from dpm.density.appm import APPM
-from dpm.density.ppm import PPM
 from dpm.density.reference import caustic_rmse
+from dpm.methods import make_estimator
 from dpm.tracer import PhotonMap, VisiblePoints
 
 PASSES = (10, 100, 1000)  # passes per run: photons_per_pass = paths / passes
+TUNED = ("ppm", "appm")  # the paper's tuned baselines (any registered progressive method works)
 
 
 @dataclass(frozen=True)
@@ -41,7 +41,7 @@ def tune(
     reference: np.ndarray,
     radii: np.ndarray,
     passes: tuple[int, ...] = PASSES,
-    methods: tuple[str, ...] = ("ppm", "appm"),
+    methods: tuple[str, ...] = TUNED,
     estimates: list[np.ndarray] | None = None,
 ) -> list[Trial]:
     """Every (method, radius, passes) setting's caustic RMSE against reference (N, 3).
@@ -51,14 +51,12 @@ def tune(
     """
     trials = []
     for method in methods:
-        cls = {"ppm": PPM, "appm": APPM}[method]
         for radius in radii:
             for n in passes:
                 per_pass = max(1, photons.n_paths // n)
                 start = time.perf_counter()
-                estimate = cls(radius=float(radius), photons_per_pass=per_pass).estimate(
-                    points, photons
-                )
+                estimator = make_estimator(method, radius=float(radius), photons_per_pass=per_pass)
+                estimate = estimator.estimate(points, photons)
                 seconds = time.perf_counter() - start
                 error = caustic_rmse(points, estimate, reference)
                 if estimates is not None:
@@ -74,15 +72,16 @@ def tune_widening(
     radii: np.ndarray,
     estimates: list[np.ndarray] | None = None,
     max_steps: int = 4,
+    methods: tuple[str, ...] = TUNED,
 ) -> list[Trial]:
     """`tune`, then extend each method's radius grid by its log step while the best is at an edge.
 
     A best setting at the edge of the grid only bounds the true optimum, which would flatter
     any method compared against "the best"; up to `max_steps` radii are added per method.
     """
-    trials = tune(points, photons, reference, radii, estimates=estimates)
+    trials = tune(points, photons, reference, radii, methods=methods, estimates=estimates)
     ratio = float(radii[1] / radii[0])
-    for method in ("ppm", "appm"):
+    for method in methods:
         for _ in range(max_steps):
             tried = sorted({t.radius for t in trials if t.method == method})
             radius = best(trials, method).radius

@@ -15,11 +15,11 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy.spatial import cKDTree
 
-from dpm.density.gather import nearest, take
+from dpm.density.gather import PhotonIndex, photon_index, take
 from dpm.nn.features import MIN_RADIUS, canonical_angle, features, kernel_estimate
 from dpm.nn.model import KernelNet
+from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap
 
 ACTIVATIONS_PER_CHUNK = 1 << 19  # points per chunk × K: bounds the activations' memory
@@ -58,19 +58,21 @@ def make_predict(model: nn.Module) -> Callable[[dict, Batch], jnp.ndarray]:
 
 
 def neighbourhoods(
-    photons: PhotonMap,
+    photons: PhotonMap | PhotonIndex,
     position: np.ndarray,
     normal: np.ndarray,
     albedo: np.ndarray,
     k: int,
     angle: np.ndarray | None = None,
-    tree: cKDTree | None = None,
+    watch: Stopwatch | None = None,
 ) -> Iterator[tuple[slice, Batch]]:
     """Batches of the k nearest photons of points (N, 3) with normals and albedos (N, 3);
-    angle (N,) turns each tangent frame (default: the canonical angle); tree: see
-    `gather.nearest`."""
+    angle (N,) turns each tangent frame (default: the canonical angle). Pass a PhotonIndex to
+    query one tree for many calls; gathering counts as the watch's "gather"."""
+    index = photon_index(photons, watch)
+    photons = index.photons
     angle = np.full(len(position), np.nan, np.float32) if angle is None else angle
-    for rows, nb in nearest(photons, position, normal, k, tree):
+    for rows, nb in index.nearest(position, normal, k, watch):
         here = np.asarray(position[rows], np.float64)
         radius = np.where(np.isfinite(nb.distance[:, -1]), nb.distance[:, -1], 0.0)
         offset = take(photons.position, nb.index).astype(np.float64) - here[:, None, :]
@@ -101,16 +103,18 @@ def pad_batch(b: Batch, size: int) -> Batch:
 def predict_points(
     predict: Callable[[dict, Batch], jnp.ndarray],
     params: dict,
-    photons: PhotonMap,
+    photons: PhotonMap | PhotonIndex,
     position: np.ndarray,
     normal: np.ndarray,
     albedo: np.ndarray,
     k: int,
+    watch: Stopwatch | None = None,
 ) -> np.ndarray:
-    """(N, 3) float32 radiance at points (N, 3) from their k nearest photons, chunk by chunk."""
+    """(N, 3) float32 radiance at points (N, 3) from their k nearest photons, chunk by chunk;
+    gathering counts as the watch's "gather" (the caller times the rest)."""
     out = np.zeros((len(position), 3), np.float32)
     size = chunk_size(k)
-    for rows, b in neighbourhoods(photons, position, normal, albedo, k):
+    for rows, b in neighbourhoods(photons, position, normal, albedo, k, watch=watch):
         for first in range(0, len(b.radius), size):
             part = Batch(*(a[first : first + size] for a in b))
             n = len(part.radius)

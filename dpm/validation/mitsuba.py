@@ -3,8 +3,13 @@
 Materials map as DESIGN.md states: twosided(diffuse), twosided(conductor, material=none),
 dielectric (int_ior = Ni, ext_ior = 1, specular_transmittance = Tf), `area` emitters with the
 emitter's own Kd behind them; flat-shaded meshes; perspective camera with fov_axis="x" and a
-box pixel filter; the `path` integrator. Run as a script it renders an example scene with both
-renderers side by side (the README figure).
+box pixel filter; the `path` integrator. Run as a module it renders an example scene with both
+renderers side by side (the README figure):
+
+    python -m dpm.validation.mitsuba examples/scenes/ring.obj -o ring.png --spp 1024
+
+Mitsuba 3 comes with the test extra (`pip install -e ".[test]"`); it is imported only inside
+the functions that need it, and its absence is a one-line InputError.
 """
 
 from __future__ import annotations
@@ -17,9 +22,22 @@ from pathlib import Path
 import numpy as np
 
 from dpm.camera import Camera
+from dpm.errors import InputError
 from dpm.scene import DIELECTRIC, MIRROR, Scene
 
 VARIANT = "scalar_rgb"  # runs anywhere; llvm_ad_rgb needs a libLLVM
+
+
+def load_mitsuba():
+    """The `mitsuba` module set to VARIANT; InputError when Mitsuba 3 is not installed."""
+    try:
+        import mitsuba as mi
+    except ImportError:
+        raise InputError(
+            "Mitsuba 3 is not installed: pip install -e '.[test]' (or pip install mitsuba)"
+        ) from None
+    mi.set_variant(VARIANT)
+    return mi
 
 
 def _write_ply(path: Path, triangles: np.ndarray) -> None:
@@ -64,9 +82,7 @@ def _bsdf(scene: Scene, m: int) -> dict:
 
 def mitsuba_scene(scene: Scene, camera: Camera, spp: int, folder: Path) -> dict:
     """A Mitsuba scene dictionary for `scene` seen by `camera`; meshes are written to folder."""
-    import mitsuba as mi
-
-    mi.set_variant(VARIANT)
+    mi = load_mitsuba()
     desc: dict = {
         "type": "scene",
         "integrator": {"type": "path", "max_depth": -1},
@@ -102,32 +118,42 @@ def mitsuba_scene(scene: Scene, camera: Camera, spp: int, folder: Path) -> dict:
 
 def render_mitsuba(scene: Scene, camera: Camera, spp: int, seed: int) -> np.ndarray:
     """Mitsuba 3's `path` render of scene: (H, W, 3) float32 linear RGB."""
-    import mitsuba as mi
-
+    mi = load_mitsuba()
     with tempfile.TemporaryDirectory() as folder:
         loaded = mi.load_dict(mitsuba_scene(scene, camera, spp, Path(folder)))
     return np.array(mi.render(loaded, spp=spp, seed=seed), dtype=np.float32)
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> int:
     """Render an example scene with dpm `pt` and Mitsuba 3; write them side by side."""
+    p = argparse.ArgumentParser(prog="python -m dpm.validation.mitsuba", description=main.__doc__)
+    p.add_argument("scene", type=Path)
+    p.add_argument("-o", "--output", type=Path, required=True, help="side-by-side PNG")
+    p.add_argument("--spp", type=int, default=256)
+    args = p.parse_args(argv)
+    try:
+        side_by_side(args.scene, args.output, args.spp)
+    except InputError as exc:
+        print(f"{p.prog}: error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def side_by_side(path: Path, output: Path, spp: int) -> None:
+    """Write dpm `pt` (left) and Mitsuba 3 `path` (right) renders of a scene as one PNG."""
     import imageio.v3 as iio
 
     from dpm import load_scene
     from dpm.io import linear_to_srgb8
     from dpm.render import RenderOptions, render
 
-    p = argparse.ArgumentParser(description=main.__doc__)
-    p.add_argument("scene", type=Path)
-    p.add_argument("-o", "--output", type=Path, required=True, help="side-by-side PNG")
-    p.add_argument("--spp", type=int, default=256)
-    args = p.parse_args()
-    scene = load_scene(args.scene)
-    ours = render(scene, RenderOptions(method="pt", spp=args.spp)).image
-    theirs = render_mitsuba(scene, scene.camera, args.spp, seed=0)
+    load_mitsuba()  # before the dpm render: a missing Mitsuba fails at once
+    scene = load_scene(path)
+    ours = render(scene, RenderOptions(method="pt", spp=spp)).image
+    theirs = render_mitsuba(scene, scene.camera, spp, seed=0)
     gap = np.ones((ours.shape[0], 4, 3), np.float32)
-    iio.imwrite(args.output, linear_to_srgb8(np.concatenate([ours, gap, theirs], axis=1)))
-    print(f"wrote {args.output}: dpm pt (left), Mitsuba 3 path (right), {args.spp} spp")
+    iio.imwrite(output, linear_to_srgb8(np.concatenate([ours, gap, theirs], axis=1)))
+    print(f"wrote {output}: dpm pt (left), Mitsuba 3 path (right), {spp} spp")
 
 
 if __name__ == "__main__":

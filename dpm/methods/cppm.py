@@ -1,0 +1,108 @@
+"""`cppm`: chi-squared progressive photon mapping (after Lin et al., SIGGRAPH Asia 2020).
+
+PPM shrinks every radius after every pass, trading variance for bias even where the photon
+density inside the disc is flat and a smaller disc would only add noise. CPPM shrinks a
+point's radius only when a chi-squared test says the photons in its disc are not uniform.
+
+Our test: the disc is split into 8 cells of equal area (an inner disc of radius R/√2 and the
+ring around it, each in 4 quadrants of the point's tangent plane), so a gradient shows as
+quadrant asymmetry and curvature as inner/outer imbalance. A point's cell counts accumulate
+over the passes that kept its radius; once every cell expects at least MIN_EXPECTED photons,
+χ² = Σ (O − E)²/E is compared with the (1 − SIGNIFICANCE) quantile of χ²(7):
+- uniform: keep R, N' = N + M, τ' = τ + Φ (every photon counts at full weight);
+- not uniform, or too few photons to test: PPM's step (N' = N + αM, R'² = R² N'/(N + M),
+  τ' = (τ + Φ) R'²/R²), and the counts start again.
+Consistent whatever the scene: any non-uniformity is found once enough photons arrive (the
+test's power tends to 1), so the radius shrinks wherever the density varies, and where the
+density is flat a disc average is the point's value.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import chi2
+
+from dpm.density.gather import PointIndex
+from dpm.density.ppm import PPMState, Progressive
+from dpm.density.progressive import ALPHA
+from dpm.methods.base import Progressive as ProgressiveMethod
+from dpm.stopwatch import Stopwatch
+from dpm.tracer import PhotonMap
+
+CELLS = 8  # equal-area cells of the disc: 2 rings × 4 quadrants
+MIN_EXPECTED = 5  # photons each cell must expect before the test is trusted (the usual rule)
+SIGNIFICANCE = 0.05  # chance of calling a uniform disc non-uniform (then it shrinks, as PPM)
+CRITICAL = float(chi2.ppf(1 - SIGNIFICANCE, CELLS - 1))  # 14.07
+
+
+def tangent_frame(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two (Q, 3) float64 unit tangents orthogonal to unit normals (Q, 3) and to each other."""
+    n = np.asarray(normal, np.float64)
+    axis = np.where(np.abs(n[:, :1]) > 0.9, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]])
+    t = np.cross(n, axis)
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    return t, np.cross(n, t)
+
+
+@dataclass
+class CPPMState(PPMState):
+    """PPM's per-point statistics (and its irradiance), with each disc's cell counts."""
+
+    cells: np.ndarray  # (n, CELLS) float64 photons per cell since R last changed
+
+    @classmethod
+    def start(cls, n: int, radius: float, alpha: float = ALPHA) -> CPPMState:
+        """A state of n points with initial radius `radius` and nothing gathered."""
+        return cls(
+            np.full(n, float(radius)), np.zeros(n), np.zeros((n, 3)), np.zeros((n, CELLS)),
+            alpha=alpha,
+        )  # fmt: skip
+
+    def add(self, index: PointIndex, photons: PhotonMap, watch: Stopwatch | None = None) -> None:
+        """Gather one pass, test each disc's uniformity, shrink the radii of the others."""
+        pairs = index.within(photons, self.radius, watch)
+        point, n = pairs.point, len(self.radius)
+        flux = photons.flux[pairs.photon].astype(np.float64) * photons.n_paths
+        offset = photons.position[pairs.photon].astype(np.float64) - index.position[point]
+        t, b = tangent_frame(index.normal[point])
+        outer = pairs.distance**2 > self.radius[point] ** 2 / 2
+        quadrant = 2 * (np.einsum("ij,ij->i", offset, t) > 0) + (
+            np.einsum("ij,ij->i", offset, b) > 0
+        )
+        cell = CELLS // 2 * outer + quadrant
+        self.cells += np.bincount(point * CELLS + cell, minlength=n * CELLS).reshape(n, CELLS)
+        found = np.bincount(point, minlength=n).astype(np.float64)
+        phi = np.stack([np.bincount(point, flux[:, c], minlength=n) for c in range(3)], 1)
+        expected = self.cells.sum(axis=1) / CELLS
+        with np.errstate(divide="ignore", invalid="ignore"):
+            statistic = ((self.cells - expected[:, None]) ** 2).sum(axis=1) / expected
+        uniform = (expected >= MIN_EXPECTED) & (statistic <= CRITICAL)
+        shrink = (found > 0) & ~uniform
+        grown = self.count + np.where(shrink, self.alpha * found, found)
+        ratio = np.divide(grown, self.count + found, out=np.ones(n), where=shrink)
+        self.radius = self.radius * np.sqrt(ratio)
+        self.tau = (self.tau + phi) * ratio[:, None]
+        self.count = grown
+        self.cells[shrink] = 0
+        self.paths += photons.n_paths
+        self.passes += 1
+        self.photons += len(photons)
+
+
+@dataclass(frozen=True)
+class CPPM(Progressive):
+    """CPPM at fixed visible points: initial radius (scene units), emitted paths per pass."""
+
+    def start(self, n: int) -> CPPMState:
+        """The state before the first pass, for n points."""
+        return CPPMState.start(n, self.radius, self.alpha)
+
+
+class ChiSquaredPPM(ProgressiveMethod):
+    """CPPM: PPM whose radii shrink only where a χ² test finds the disc non-uniform."""
+
+    name = "cppm"
+    summary = "chi-squared PPM: a radius shrinks only where its disc's photons are not uniform"
+    estimator_class = CPPM

@@ -1,0 +1,110 @@
+"""Stochastic progressive photon mapping (Hachisuka & Jensen 2009), per pixel.
+
+Unlike the estimators at fixed visible points, SPPM traces new visible points every pass
+(one jittered camera sample per pixel, Fresnel-sampled through glass) and keeps PPM's
+statistics per pixel, so pixels seen through glass or partly covered average over their
+whole footprint. The flux a pixel gathers is weighted by its camera throughput and ρ/π, so
+the result is the caustic radiance as the camera sees it.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from dpm.camera import Camera
+from dpm.density.gather import PointIndex
+from dpm.density.ppm import ALPHA, PPMState, check_progressive
+from dpm.density.progressive import pass_seed
+from dpm.errors import InputError
+from dpm.methods.base import Progressive
+from dpm.options import RenderOptions
+from dpm.scene import Scene
+from dpm.stopwatch import Stopwatch
+from dpm.tracer import BVH, trace_photons, trace_visible_points
+
+
+def sppm_caustics(
+    scene: Scene,
+    bvh: BVH,
+    camera: Camera,
+    n_paths: int,
+    seed: int,
+    radius: float,
+    photons_per_pass: int,
+    alpha: float = ALPHA,
+    progress: bool = False,
+    watch: Stopwatch | None = None,
+) -> tuple[np.ndarray, int]:
+    """((H, W, 3) float32 caustic radiance per pixel as the camera sees it, caustic photons)
+    from n_paths emitted photon paths in passes of photons_per_pass from the initial radius
+    (scene units); stages "visible_points", "photons", "gather" and "estimate" count on watch."""
+    check_progressive(radius, photons_per_pass, alpha)
+    watch = watch or Stopwatch()
+    state = PPMState.start(camera.width * camera.height, radius, alpha)
+    n_passes = -(-n_paths // photons_per_pass)
+    n_photons = 0
+    for j in tqdm(range(n_passes), unit="pass", disable=not progress, desc="sppm"):
+        with watch("visible_points"):
+            points = trace_visible_points(
+                scene, bvh, camera, 1, pass_seed(seed, j), (0, camera.height)
+            )
+        with watch("photons"):
+            photons = trace_photons(
+                scene, bvh, min(photons_per_pass, n_paths - j * photons_per_pass), seed,
+                caustic_only=True, first_path=j * photons_per_pass,
+            )  # fmt: skip
+        with watch("estimate"):
+            n_photons += len(photons)
+            hit = np.flatnonzero(points.hit)  # one sample per pixel: row = pixel
+            index = PointIndex(points.position[hit], points.normal[hit])
+            pairs = index.within(photons, state.radius[hit], watch)
+            pixel = hit[pairs.point]
+            weight = points.throughput[pixel].astype(np.float64) * points.albedo[pixel] / np.pi
+            flux = photons.flux[pairs.photon].astype(np.float64) * photons.n_paths * weight
+            state.update(pixel, flux)  # PPM's statistics, per pixel
+            state.paths += photons.n_paths
+    image = state.irradiance()  # already weighted by throughput · ρ/π: radiance
+    return image.reshape(camera.height, camera.width, 3).astype(np.float32), n_photons
+
+
+class StochasticPPM(Progressive):
+    """SPPM: the caustic image per pixel, from its own camera samples every pass."""
+
+    name = "sppm"
+    summary = "stochastic PPM: new camera samples every pass, statistics per pixel"
+    options = frozenset({"radius", "photons_per_pass"})
+    at_points = False
+    all_points = False
+
+    @classmethod
+    def check(cls, options: RenderOptions) -> None:
+        """Progressive's checks; a caustic-only image has no guides to denoise with."""
+        super().check(options)
+        if options.component == "caustic" and options.denoised:
+            raise InputError(
+                "sppm's caustic component has no albedo and normal images to denoise with"
+            )
+
+    def prepare(self, bvh: BVH, camera: Camera, watch: Stopwatch) -> None:
+        """Render the caustic image, pass by pass."""
+        o = self.options
+        self.radius_, self.per_pass = self.radius(), self.photons_per_pass()
+        self.image, self.caustic_photons = sppm_caustics(
+            self.scene, bvh, camera, o.photons, o.seed, self.radius_, self.per_pass,
+            progress=o.progress, watch=watch,
+        )  # fmt: skip
+
+    def caustic_pixels(self) -> np.ndarray:
+        """(H, W, 3) float32 caustic radiance per pixel as the camera sees it."""
+        return self.image
+
+    def stats(self) -> dict[str, Any]:
+        """Emitted paths, caustic photons, initial radius and paths per pass."""
+        return {
+            "photon_paths": self.options.photons, "caustic_photons": self.caustic_photons,
+            "caustic_spp": self.options.caustic_samples, "radius": self.radius_,
+            "photons_per_pass": self.per_pass,
+        }  # fmt: skip

@@ -1,0 +1,153 @@
+"""What to render: one options dataclass from which the `dpm-render` flags, their help and
+the scene sidecar's `[render]` keys are all derived.
+
+Options a method reads only for itself (`--k`, `--radius`, ...) default to None and are
+*scoped*: each method lists the ones it reads (`Method.options`), and a flag given to a
+method that does not read it is an error. A sidecar's value for such an option is a default
+for the methods that read it and is passed over by the others.
+"""
+
+from __future__ import annotations
+
+from dataclasses import MISSING, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+from dpm.errors import InputError
+
+COMPONENTS = ("full", "caustic")
+
+
+def _option(
+    default: Any,
+    help: str,
+    *,
+    scoped: bool = False,
+    sidecar: bool = True,
+    default_text: str | None = None,
+    metavar: str | None = None,
+    supersedes: tuple[str, ...] = (),
+) -> Any:
+    """A RenderOptions field with its flag's help; default_text replaces a None default;
+    when given as a flag it sets aside the sidecar's values of the fields in `supersedes`."""
+    meta = {"help": help, "scoped": scoped, "sidecar": sidecar, "default_text": default_text,
+            "metavar": metavar, "supersedes": supersedes}  # fmt: skip
+    return field(default=default, metadata=meta)
+
+
+@dataclass
+class RenderOptions:
+    """What to render; None means the default named in each field's help."""
+
+    method: str = _option("hybrid", "rendering method")
+    spp: int = _option(16, "samples per pixel")
+    photons: int = _option(200_000, "emitted photon paths (photon methods)")
+    seed: int = _option(0, "random seed (same seed, same image)")
+    width: int | None = _option(None, "image width in pixels", default_text="the scene's camera")
+    height: int | None = _option(None, "image height in pixels", default_text="the scene's camera")
+    component: str = _option("full", "full image, or the caustics only")
+    k: int | None = _option(
+        None, "nearest photons per estimate", scoped=True,
+        default_text="50; dpm and hybrid: the weight file's K",
+    )  # fmt: skip
+    radius: float | None = _option(
+        None, "initial gather radius, scene units", scoped=True,
+        default_text="0.001 x the scene's bounding diagonal",
+    )  # fmt: skip
+    photons_per_pass: int | None = _option(
+        None, "emitted photon paths per pass", scoped=True, default_text="photons / 10"
+    )
+    checkpoint: Path | None = _option(
+        None, "save the statistics here as it goes and resume from them", scoped=True,
+        sidecar=False, default_text="none", metavar="FILE.npz",
+    )  # fmt: skip
+    weights: Path | None = _option(
+        None, "network weights from dpm-train", scoped=True, sidecar=False,
+        default_text="the shipped model for --k", metavar="FILE.msgpack", supersedes=("k",),
+    )  # fmt: skip
+    caustic_spp: int | None = _option(
+        None, "estimate caustics at the first N samples per pixel only", scoped=True,
+        default_text="every sample; hybrid: 1", metavar="N",
+    )  # fmt: skip
+    denoise: bool | None = _option(
+        None, "Open Image Denoise with albedo and normal guides",
+        default_text="on for hybrid only",
+    )  # fmt: skip
+    progress: bool = field(default=True, metadata={"cli": False})  # progress bars
+
+    @property
+    def caustic_samples(self) -> int:
+        """Samples per pixel (the first ones) whose visible points get a caustic estimate."""
+        default = self.method_class().caustic_spp or self.spp
+        return min(self.spp, self.caustic_spp or default)
+
+    @property
+    def denoised(self) -> bool:
+        """Whether the image goes through the denoiser."""
+        return self.method_class().denoise if self.denoise is None else self.denoise
+
+    def method_class(self) -> type:
+        """The registered Method class named by `method` (InputError when there is none)."""
+        from dpm.methods import method_class  # the registry imports the renderers
+
+        return method_class(self.method)
+
+
+def cli_fields() -> list[Any]:
+    """The RenderOptions fields that are dpm-render flags, in declaration order."""
+    return [f for f in fields(RenderOptions) if f.metadata.get("cli", True)]
+
+
+def sidecar_types() -> dict[str, type]:
+    """`[render]` keys a scene sidecar may set, with the TOML value type each must have."""
+    kinds = {"int": int, "float": float, "str": str, "bool": bool}
+    out = {}
+    for f in cli_fields():
+        if f.metadata["sidecar"]:
+            out[f.name] = kinds[str(f.type).split(" |")[0]]
+    return out
+
+
+def default_text(f: Any) -> str:
+    """How --help names a field's default."""
+    if f.metadata.get("default_text"):
+        return f.metadata["default_text"]
+    return str(f.default) if f.default is not MISSING else "required"
+
+
+def flag(name: str) -> str:
+    """The command-line flag of a field name: photons_per_pass -> --photons-per-pass."""
+    return "--" + name.replace("_", "-")
+
+
+def scoped_users(name: str) -> list[str]:
+    """Names of the methods that read the scoped option `name`."""
+    from dpm.methods import METHODS
+
+    return [m for m, cls in METHODS.items() if name in cls.options]
+
+
+def validate(options: RenderOptions) -> None:
+    """Raise InputError (naming the flag) for options the chosen method cannot use."""
+    cls = options.method_class()
+    if options.component not in COMPONENTS:
+        raise InputError(f"unknown component '{options.component}'; use full or caustic")
+    if options.component == "caustic" and not cls.caustic_component:
+        raise InputError(f"method '{options.method}' renders no separate caustic component")
+    for f in cli_fields():
+        if f.metadata["scoped"] and getattr(options, f.name) is not None:
+            if f.name not in cls.options:
+                users = ", ".join(scoped_users(f.name))
+                raise InputError(f"{flag(f.name)} applies to {users} only, not {options.method}")
+    for name in ("spp", "k", "caustic_spp"):
+        if getattr(options, name) is not None and getattr(options, name) < 1:
+            raise InputError(f"{flag(name)} must be at least 1")
+    if options.photons < 0:
+        raise InputError("--photons must not be negative")
+    if options.seed < 0:
+        raise InputError("--seed must not be negative")
+    for name in ("width", "height"):
+        value = getattr(options, name)
+        if value is not None and not 1 <= value <= 16384:
+            raise InputError(f"{flag(name)} must be from 1 to 16384")
+    cls.check(options)

@@ -1,0 +1,161 @@
+"""The method registry, the options derived from one dataclass, and dpm-render's rough edges."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import write_scene
+from dpm import __version__, load_scene
+from dpm.cli import render_main
+from dpm.methods import METHODS, caustic_methods, make_estimator, method_class
+from dpm.methods.base import NearestPhotons
+from dpm.options import RenderOptions, cli_fields, sidecar_types
+from dpm.render import render
+
+EGG = Path(__file__).parent.parent / "examples" / "scenes" / "glass_egg.obj"
+K = 8
+
+
+def run(capsys, argv: list[str]) -> tuple[int, str, str]:
+    """dpm-render in-process: (exit status, stdout, stderr)."""
+    try:
+        code = render_main(argv)
+    except SystemExit as exc:  # argparse: usage errors, --help, --version
+        code = exc.code
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_every_registered_method_renders_through_the_one_path() -> None:
+    scene = load_scene(EGG)
+    for name, cls in METHODS.items():
+        assert cls.name == name and method_class(name) is cls and cls.summary
+        options = RenderOptions(method=name, spp=1, photons=20_000, width=8, height=8)
+        options.progress = False  # k: each method's default (dpm, hybrid: the shipped K = 50)
+        result = render(scene, options)
+        assert result.image.shape == (8, 8, 3) and np.isfinite(result.image).all()
+        assert result.stats["method"] == name
+        assert ("caustic_photons" in result.stats) == (name in caustic_methods())
+
+
+def test_a_new_method_needs_only_its_class_and_a_registration(monkeypatch) -> None:
+    """What adding a method takes: a Method subclass and one entry in METHODS."""
+
+    class TwicePM(NearestPhotons):
+        name = "twice-pm"
+        summary = "PM-K doubled (a test method)"
+
+        @classmethod
+        def make_estimator(cls, **params):
+            pm = make_estimator("pm", **params)
+
+            class Twice:
+                k = pm.k
+
+                def estimate(self, points, photons, watch=None):
+                    return 2 * pm.estimate(points, photons, watch)
+
+            return Twice()
+
+    monkeypatch.setitem(METHODS, "twice-pm", TwicePM)
+    scene = load_scene(EGG)
+    common = dict(spp=1, photons=20_000, width=8, height=8, k=K, component="caustic")
+    pm = render(scene, RenderOptions(method="pm", progress=False, **common))
+    twice = render(scene, RenderOptions(method="twice-pm", progress=False, **common))
+    np.testing.assert_allclose(twice.image, 2 * pm.image, rtol=1e-6)
+    assert twice.stats["k"] == K and "gather" in twice.stats["seconds"]
+
+
+def test_flags_and_sidecar_keys_come_from_the_options_dataclass(capsys) -> None:
+    code, out, _ = run(capsys, ["--help"])
+    assert code == 0
+    for f in cli_fields():
+        assert "--" + f.name.replace("_", "-") in out
+    assert "(default: 16)" in out and "(default: hybrid)" in out  # --help shows defaults
+    for name in METHODS:
+        assert f"{name}:" in out  # the methods' one-line summaries
+    assert set(sidecar_types()) >= {"method", "spp", "photons", "k", "seed", "radius"}
+    assert "checkpoint" not in sidecar_types()  # paths are flags only
+    code, out, _ = run(capsys, ["--version"])
+    assert code == 0 and out.strip() == f"dpm-render {__version__}"
+
+
+def test_a_flag_the_method_does_not_read_is_an_error_but_a_sidecar_default_is_not(
+    tmp_path: Path, capsys
+) -> None:
+    path = write_scene(tmp_path, toml="[render]\nk = 50\nradius = 0.5\nspp = 1\n")
+    out = tmp_path / "o.exr"
+    code, _, err = run(capsys, [str(path), "-o", str(out), "--quiet", "--method", "pt", "--k", "5"])
+    assert code == 2 and "--k applies to pm, dpm, hybrid only" in err and not out.exists()
+    stats = tmp_path / "s.json"
+    argv = [str(path), "-o", str(out), "--quiet", "--method", "pt", "--stats", str(stats)]
+    assert run(capsys, argv)[0] == 0  # the sidecar's k and radius are for other methods
+    assert json.loads(stats.read_text())["spp"] == 1  # while its spp applies
+
+
+def test_photons_zero_is_an_error_for_photon_methods(scene_path: Path, capsys) -> None:
+    out = scene_path.parent / "o.png"
+    for method in caustic_methods():
+        argv = [str(scene_path), "-o", str(out), "--quiet", "--method", method, "--photons", "0"]
+        code, _, err = run(capsys, argv)
+        assert code == 2 and "--photons must be at least 1" in err and "pt-nocaustic" in err
+        assert len(err.strip().splitlines()) == 1 and not out.exists()
+    argv = [str(scene_path), "-o", str(out), "--quiet", "--method", "pt", "--photons", "0"]
+    assert run(capsys, argv)[0] == 0  # the path tracers trace no photons
+
+
+def test_k_defaults_to_the_weight_files_k(tmp_path: Path, capsys) -> None:
+    from dpm.nn.model import make_model
+    from dpm.nn.train import init_params
+    from dpm.nn.weights import Weights, save_weights
+
+    weights = tmp_path / "w.msgpack"
+    save_weights(weights, Weights("dpm", 8, K, init_params(make_model("dpm", 8), K, 0)))
+    stats = tmp_path / "s.json"
+    argv = [str(EGG), "-o", str(tmp_path / "o.exr"), "--quiet", "--width", "8", "--height", "8",
+            "--spp", "1", "--photons", "20000", "--method", "dpm", "--weights", str(weights),
+            "--stats", str(stats)]  # fmt: skip
+    assert run(capsys, argv)[0] == 0
+    assert json.loads(stats.read_text())["k"] == K
+    code, _, err = run(capsys, [*argv, "--k", "50"])
+    assert code == 2 and f"trained with K = {K}, not 50" in err
+
+
+def test_an_unwritable_output_is_refused_before_the_render(
+    scene_path: Path, capsys, monkeypatch
+) -> None:
+    def no_render(*args, **kwargs):
+        raise AssertionError("rendered before checking the outputs")
+
+    monkeypatch.setattr("dpm.cli.render", no_render)
+    folder = scene_path.parent
+    (folder / "taken.png").mkdir()
+    for target, expected in (
+        (folder / "taken.png", "is a folder"),
+        (Path("/proc/dpm-out.png"), "cannot write there"),  # a read-only file system
+        (folder / "missing" / "o.exr", "output folder does not exist"),
+    ):
+        code, _, err = run(capsys, [str(scene_path), "-o", str(target), "--quiet"])
+        assert code == 2 and expected in err and len(err.strip().splitlines()) == 1, err
+    code, _, err = run(capsys, [str(scene_path), "--stats", "/proc/s.json", "--quiet"])
+    assert code == 2 and "cannot write there" in err
+    assert sorted(p.name for p in folder.iterdir()) == ["scene.mtl", "scene.obj", "taken.png"]
+
+
+def test_unknown_method_from_a_sidecar_is_one_line(tmp_path: Path, capsys) -> None:
+    path = write_scene(tmp_path, toml="[render]\nmethod = 'magic'\n")
+    code, _, err = run(capsys, [str(path), "-o", str(tmp_path / "o.png"), "--quiet"])
+    assert code == 2 and "unknown method 'magic'" in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("name", ["pm", "ppm", "appm", "dpm"])
+def test_make_estimator_builds_each_methods_estimator(name: str) -> None:
+    params = {"k": K} if name in ("pm", "dpm") else {"radius": 0.1, "photons_per_pass": 10}
+    if name == "dpm":
+        params["k"] = 50  # a shipped model
+    estimator = make_estimator(name, **params)
+    assert callable(estimator.estimate)
