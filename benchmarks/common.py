@@ -66,7 +66,7 @@ def photon_methods() -> dict[str, type[Method]]:
         name: cls
         for name, cls in METHODS.items()
         if cls.at_points
-        and "make_estimator" in vars(cls)
+        and ("estimator_class" in vars(cls) or "make_estimator" in vars(cls))
         and issubclass(cls, NearestPhotons | Progressive)
     }
 

@@ -137,3 +137,10 @@ def test_findings_are_reported_never_asserted() -> None:
     )
     assert any(line.startswith("- must hold, FAIL: s NAN") for line in lines)
     assert any(line.startswith("- finding: s BAD") for line in lines)
+
+
+def test_the_benchmarks_compare_every_method_with_an_estimator_of_its_own() -> None:
+    # hybrid reuses dpm's estimator, sppm renders per pixel and pt has no caustic estimate
+    from common import photon_methods
+
+    assert list(photon_methods()) == ["pm", "ppm", "appm", "cppm", "dpm"]
