@@ -99,7 +99,11 @@ def run_budget(
 
 
 def run_scene(
-    name: str, reference_paths: int, max_reference_paths: int, reference_radius: float
+    name: str,
+    reference_paths: int,
+    max_reference_paths: int,
+    reference_radius: float,
+    ray_address: str | None = None,
 ) -> dict:
     """Measure one scene, growing its reference until the ⅕ rule holds; returns the JSON record."""
     scene = load_scene(SCENES / f"{name}.obj")
@@ -114,7 +118,7 @@ def run_scene(
         ref, (seconds,) = timed(partial(
             ppm_reference, scene, bvh, points, paths, reference_radius * diagonal,
             REFERENCE_PATHS_PER_PASS, seed=1, checkpoint_dir=RESULTS / "references" / name,
-            progress=True,
+            progress=True, workers=2, ray_address=ray_address,
         ))  # fmt: skip
         reference_seconds += seconds
         print(name, f"reference {ref.n_paths:,} paths: noise {ref.noise:.5f}", flush=True)
@@ -227,11 +231,16 @@ def main() -> None:
     p.add_argument("--max-reference-paths", type=float, default=3e9)
     p.add_argument("--reference-radius", type=float, default=REFERENCE_RADIUS,
                    help="initial PPM radius of the reference, × scene diagonal")  # fmt: skip
+    p.add_argument(
+        "--ray-address", metavar="ADDR",
+        help="run the reference's two halves on this Ray cluster (default: as two tasks of a "
+        "local Ray runtime; the checkpoint folder must be shared)",
+    )  # fmt: skip
     args = p.parse_args()
     (RESULTS / "estimators").mkdir(parents=True, exist_ok=True)
     for name in args.scenes:
         record = run_scene(name, int(args.reference_paths), int(args.max_reference_paths),
-                           args.reference_radius)  # fmt: skip
+                           args.reference_radius, args.ray_address)  # fmt: skip
         (RESULTS / "estimators" / f"{name}.json").write_text(json.dumps(record, indent=1))
         write_markdown()
 

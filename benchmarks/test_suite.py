@@ -145,7 +145,9 @@ def test_accuracy_against_time(suite: Suite) -> None:
         + ", ".join(f"{b:,}" for b in suite.s.budgets)
         + f" (M = {M:,}). PPM-best and "
         "APPM-best keep the parameters the estimator table tuned at M (same initial radius and "
-        "number of passes at every budget). SPPM is left out: it averages over each pixel's "
+        "number of passes at every budget); CPPM, not tuned yet, starts from the default "
+        "radius (0.001 × the scene's diagonal) with 10 passes at every budget. SPPM is left "
+        "out: it averages over each pixel's "
         "footprint while the reference is at one visible point per pixel.",
         "",
         "![all scenes](accuracy.png)",
@@ -263,8 +265,9 @@ def test_paper_tables(suite: Suite) -> None:
             "Caustic RMSE (camera-weighted, one visible point per pixel of a 128-wide image). "
             "The classic columns are the estimator table's (`benchmarks/results/estimators.md`: "
             "PPM and APPM tuned per scene and budget); the methods it does not tune (DPM's "
-            "models) are run here on the same photon map (seed 0), with their RMSE over the "
-            "best classic one (below 1: they win). The same table at M is "
+            "models; CPPM, untuned, at the default initial radius and 10 passes) are run here "
+            "on the same photon map (seed 0), with their RMSE over the best tabled one (below "
+            "1: they win). The same table at M is "
             "`benchmarks/results/dpm.md` (`python benchmarks/dpm_table.py`). **Best**, _second "
             "best_.",
             "",

@@ -10,6 +10,7 @@ import sys
 import tempfile
 import warnings
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 
 from dpm import __version__
@@ -193,6 +194,11 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     """`dpm-train`: make the training set, train, write the weights; returns exit status."""
     p = _Parser(prog="dpm-train", description="Train a DPM kernel-prediction network.")
     p.add_argument("--config", type=Path, required=True, help="training config (.toml)")
+    p.add_argument(
+        "--ray-address", metavar="ADDR",
+        help="make the training set on this Ray cluster (default: the config's [data] "
+        "ray_address; none: this machine, [data] workers processes at once)",
+    )  # fmt: skip
     p.add_argument("--quiet", action="store_true", help="no progress bars or summary")
     p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     args = p.parse_args(argv)
@@ -202,6 +208,8 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         from dpm.nn.train import train
 
         config = load_config(args.config)
+        if args.ray_address:
+            config = replace(config, data=replace(config.data, ray_address=args.ray_address))
         _, rows = train(config, progress=not args.quiet and sys.stderr.isatty())
         if not args.quiet:
             last = next((r for r in reversed(rows) if r["validation_loss"]), rows[-1])

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-from dataclasses import fields, replace
+import os
+import sys
+import tomllib
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -11,10 +14,20 @@ import trimesh
 
 from dpm import load_scene
 from dpm.data.builder import write_scene
-from dpm.data.dataset import DataConfig, build, load_shard, read_manifest, shard_sizes
+from dpm.data.dataset import (
+    MANIFEST,
+    DataConfig,
+    build,
+    load_shard,
+    make_shard,
+    read_manifest,
+    shard_sizes,
+)
 from dpm.data.procedural import random_scene
 from dpm.errors import InputError
 from dpm.scene import DIELECTRIC, DIFFUSE
+
+ROOT = Path(__file__).parent.parent
 
 
 def tiny(out: Path, scenes: int, workers: int = 1) -> DataConfig:
@@ -71,15 +84,62 @@ def test_a_build_resumes_and_refuses_other_settings(tmp_path: Path) -> None:
         "scene00000.npz", "scene00001.npz", "scene00002.npz"]  # fmt: skip
 
 
-def test_parallel_build_equals_serial(tmp_path: Path) -> None:
-    serial = build(tiny(tmp_path / "one", 2), progress=False)
-    parallel = build(tiny(tmp_path / "two", 2, workers=2), progress=False)
-    for a, b in zip(serial["shards"], parallel["shards"], strict=True):
-        x = load_shard(tmp_path / "one", a, (20_000, 40_000))
-        y = load_shard(tmp_path / "two", b, (20_000, 40_000))
-        assert x.photons.keys() == y.photons.keys() == {20_000, 40_000}
-        pairs = [(x, y)] + [(x.photons[budget], y.photons[budget]) for budget in x.photons]
-        for u, v in pairs:
-            for f in fields(u):
-                if f.name != "photons":  # the photon sets: compared as pairs of their own
-                    np.testing.assert_array_equal(getattr(u, f.name), getattr(v, f.name), f.name)
+def set_files(root: Path) -> dict[str, bytes]:
+    """Every file of a training set but its manifest, by path relative to `root`."""
+    files = (p for p in root.rglob("*") if p.is_file() and p.name != MANIFEST)
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(files)}
+
+
+def assert_same_set(a: Path, b: Path) -> None:
+    """Two training sets hold the same files byte for byte and the same manifest, but for the
+    seconds each scene took."""
+    files_a, files_b = set_files(a), set_files(b)
+    assert files_a.keys() == files_b.keys()
+    for name in files_a:
+        assert files_a[name] == files_b[name], name
+    manifests = [read_manifest(root) for root in (a, b)]
+    assert manifests[0]["config"] == manifests[1]["config"]
+    entries = [[{k: v for k, v in e.items() if k != "seconds"} for e in m["shards"]]
+               for m in manifests]  # fmt: skip
+    assert entries[0] == entries[1]
+
+
+@pytest.fixture(scope="module")
+def tiny_set(tmp_path_factory) -> tuple[DataConfig, Path]:
+    """configs/tiny.toml's [data] table and its set, built serially in a temporary folder."""
+    raw = tomllib.loads((ROOT / "configs" / "tiny.toml").read_text())["data"]
+    out = tmp_path_factory.mktemp("tiny-serial")
+    config = DataConfig(**{**raw, "out": str(out), "budgets": tuple(raw["budgets"])})
+    build(config, progress=False)
+    return config, out
+
+
+def test_a_ray_build_equals_the_serial_build(tiny_set, tmp_path: Path) -> None:
+    config, serial = tiny_set
+    build(replace(config, out=str(tmp_path), workers=2), progress=False)  # local Ray, 2 workers
+    assert_same_set(serial, tmp_path)
+
+
+def make_and_die_once(config: DataConfig, index: int, threads: int | None) -> tuple[dict, dict]:
+    """make_shard, but the first worker to finish scene 1 dies before it can hand it back."""
+    made = make_shard(config, index, threads)
+    marker = Path(config.out).parent / "killed"
+    if index == 1 and not marker.exists():
+        marker.touch()
+        os._exit(1)  # the worker process is gone mid-build: Ray runs the task again
+    return made
+
+
+def test_a_killed_worker_is_redone_and_the_set_is_the_same(tiny_set, tmp_path: Path) -> None:
+    import ray
+
+    config, serial = tiny_set
+    out = tmp_path / "set"
+    module = sys.modules[__name__]
+    ray.cloudpickle.register_pickle_by_value(module)  # the workers cannot import tests/
+    try:
+        build(replace(config, out=str(out), workers=2), progress=False, make=make_and_die_once)
+    finally:
+        ray.cloudpickle.unregister_pickle_by_value(module)
+    assert (tmp_path / "killed").exists()  # a worker did die
+    assert_same_set(serial, out)

@@ -10,6 +10,7 @@ import pytest
 from dpm import load_scene, stopwatch
 from dpm.density import APPM, PM, PPM, gather
 from dpm.density.progressive import run_passes
+from dpm.density.reference import ppm_reference
 from dpm.density.tuning import best, rescore, tune_widening
 from dpm.errors import InputError
 from dpm.methods.cppm import CPPM
@@ -255,6 +256,18 @@ def test_guided_emission_changes_no_expectation(egg) -> None:
     a = PPM(radius=0.1, photons_per_pass=4_000_000).estimate(points, plain)
     b = PPM(radius=0.1, photons_per_pass=200_000).estimate(points, guided)
     assert float(a.mean()) == pytest.approx(float(b.mean()), rel=0.05)
+
+
+def test_a_reference_from_two_ray_tasks_is_the_serial_one(egg, tmp_path: Path) -> None:
+    scene, bvh, points = egg
+    args = (scene, bvh, points, 400_000, 0.02, 100_000)
+    serial = ppm_reference(*args, seed=4)
+    fanned = ppm_reference(*args, seed=4, workers=2, checkpoint_dir=tmp_path)  # local Ray
+    np.testing.assert_array_equal(serial.radiance, fanned.radiance)
+    assert (serial.noise, serial.n_paths, serial.caustic_photons) == (
+        fanned.noise, fanned.n_paths, fanned.caustic_photons)  # fmt: skip
+    assert serial.noise > 0 and sorted(p.name for p in tmp_path.iterdir()) == [
+        "half1.npz", "half2.npz"]  # fmt: skip
 
 
 def test_sppm_and_ppm_see_the_same_caustics(egg) -> None:

@@ -3,6 +3,9 @@ implementation, training steps, kill-and-resume, weight files and the CLI."""
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import tomllib
 from dataclasses import replace
 from pathlib import Path
@@ -22,6 +25,7 @@ from dpm.nn.infer import Batch, make_predict, neighbourhoods, point_radiance, pr
 from dpm.nn.losses import loss_value, mu_law
 from dpm.nn.model import make_model
 from dpm.nn.sampler import Sampler
+from dpm.nn.sharding import DataParallel
 from dpm.nn.train import init_params, make_steps, train
 from dpm.nn.weights import Weights, load_weights, save_weights
 from dpm.tracer import PhotonMap, VisiblePoints
@@ -226,6 +230,47 @@ def test_balanced_loss_is_one_for_the_uniform_kernel_and_trains() -> None:
             assert float(loss(params, b, target, part)) < 1.0
 
 
+def steps_over(devices: DataParallel | None, steps: int = 3) -> list[np.ndarray]:
+    """The parameters' leaves after `steps` balanced mse+relmse steps on fixed batches of 64
+    points in 4 parts, each batch split over `devices` (None: not sharded)."""
+    model = make_model("dpm", 8)
+    optimiser, _, step = make_steps(model, 1e-2, "mse+relmse", balance=True)
+    params = init_params(model, K, 0)
+    opt_state = optimiser.init(params)
+    if devices is not None:
+        params, opt_state = devices.replicate(params), devices.replicate(opt_state)
+    for s in range(steps):
+        batch = plane_batch(64, 10 + s)
+        target = np.random.default_rng(s).random((64, 3)).astype(np.float32) * 0.1
+        data = (batch, target, np.repeat(np.arange(4, dtype=np.int32), 16))
+        params, opt_state, _ = step(params, opt_state, *(devices.split(data) if devices else data))
+    return [np.asarray(x) for x in jax.tree.leaves(params)]
+
+
+def test_the_sharded_step_on_one_device_is_the_plain_step() -> None:
+    one = DataParallel(jax.devices()[:1])
+    for a, b in zip(steps_over(None), steps_over(one), strict=True):
+        np.testing.assert_array_equal(a, b)
+    with pytest.raises(InputError, match="multiple of the 3 JAX devices"):
+        DataParallel(jax.devices()[:1] * 3).check("[train] batch", 64)
+
+
+def test_the_sharded_step_over_two_devices_equals_the_plain_step() -> None:
+    # two host devices exist only if XLA is told before JAX starts: a fresh interpreter
+    code = (
+        "import jax, numpy as np, test_nn\n"
+        "from dpm.nn.sharding import DataParallel\n"
+        "assert len(jax.devices()) == 2\n"
+        "a, b = test_nn.steps_over(None), test_nn.steps_over(DataParallel())\n"
+        "print(max(float(np.abs(x - y).max() / np.abs(x).max()) for x, y in zip(a, b)))\n"
+    )
+    env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2",
+           "PYTHONPATH": str(Path(__file__).parent), "JAX_PLATFORMS": "cpu"}  # fmt: skip
+    done = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert float(done.stdout.split()[-1]) < 1e-5  # the same step, float sums in another order
+
+
 def test_mu_law_is_eq4() -> None:
     v = jnp.array([0.0, 0.01, 1.0, 50.0])
     np.testing.assert_allclose(mu_law(v), np.log(1 + 5000 * v) / np.log(5001), rtol=1e-6)
@@ -347,6 +392,20 @@ def test_bad_configs_are_one_line(
     err = capsys.readouterr().err
     assert expected in err and len(err.strip().splitlines()) == 1, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.toml"]
+
+
+def test_the_ray_address_comes_from_the_flag_over_the_config(tmp_path: Path, monkeypatch):
+    import dpm.nn.train
+
+    seen = []
+    monkeypatch.setattr(dpm.nn.train, "train", lambda config, progress: (seen.append(config), []))
+    text = (ROOT / "configs" / "tiny.toml").read_text()
+    config = tmp_path / "ray.toml"
+    config.write_text(text.replace("[data]\n", '[data]\nray_address = "head:6379"\n'))
+    assert train_main(["--config", str(config), "--quiet"]) == 0
+    assert train_main(["--config", str(config), "--quiet", "--ray-address", "other:6379"]) == 0
+    assert [c.data.ray_address for c in seen] == ["head:6379", "other:6379"]
+    assert seen[0].data.identity() == load_config(ROOT / "configs" / "tiny.toml").data.identity()
 
 
 def test_committed_configs_load() -> None:

@@ -8,18 +8,25 @@ Layout of `DataConfig.out`:
   photons of B emitted paths (`B/position`, `B/direction`, `B/flux`, `B/normal`);
 - `manifest.json`: the config and one entry per finished shard.
 Only this module knows a shard's array names: `load_shard` reads one back as a `Shard`, and
-`shard_sizes` reads its counts from its manifest entry. A shard is written atomically, so a
-killed build resumes with the scenes it has; scenes are made in parallel worker processes,
-and each depends only on (seed, index).
+`shard_sizes` reads its counts from its manifest entry.
+
+Each scene depends only on (seed, index), and a shard's bytes only on its arrays (fixed zip
+timestamps), so a set is the same file for file however it was made. `make_shard` writes
+nothing: it returns the scene's files, and `build` writes them atomically and then the
+manifest entry, so a killed build resumes with the scenes it has. With `workers` > 1 or a
+`ray_address` the scenes are made as Ray tasks (`dpm.parallel`: local worker processes, or a
+cluster, which then needs no shared file system); a task whose worker dies is run again.
 """
 
 from __future__ import annotations
 
+import io
 import json
+import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+import zipfile
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
-from multiprocessing import get_context
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -30,6 +37,7 @@ from dpm.data.builder import write_scene
 from dpm.data.procedural import random_scene
 from dpm.errors import InputError
 from dpm.io import atomic
+from dpm.parallel import fan_out
 
 if TYPE_CHECKING:
     from dpm.tracer import PhotonMap
@@ -52,12 +60,13 @@ class DataConfig:
     reference_radius: float = 5e-4  # PPM initial radius × the scene's bounding diagonal
     reference_paths_per_pass: int = 1_000_000
     seed: int = 0
-    workers: int = 1  # scenes made at once (processes)
+    workers: int = 1  # scenes made at once: > 1 runs them as tasks of a local Ray runtime
+    ray_address: str = ""  # a Ray cluster to make the scenes on instead (workers is ignored)
 
     def identity(self) -> dict:
-        """What a set's content depends on (not where it lives or how many workers)."""
+        """What a set's content depends on (not where it lives or what makes it)."""
         d = asdict(self)
-        for key in ("out", "scenes", "workers"):
+        for key in ("out", "scenes", "workers", "ray_address"):
             d.pop(key)
         d["budgets"] = list(self.budgets)
         d["generator"] = GENERATOR
@@ -85,20 +94,37 @@ def shard_name(index: int) -> str:
     return f"scene{index:05d}"
 
 
-def make_shard(config: DataConfig, index: int) -> dict:
-    """Make scene `index` and its shard; returns its manifest entry."""
+def npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
+    """A compressed .npz of `arrays` (what np.savez_compressed writes) whose bytes depend on
+    the arrays alone: every member has the same fixed timestamp."""
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
+        for name, array in arrays.items():
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_DEFLATED
+            with zf.open(info, "w", force_zip64=True) as f:
+                np.lib.format.write_array(f, np.asanyarray(array), allow_pickle=False)
+    return buf.getvalue()
+
+
+def make_shard(config: DataConfig, index: int, threads: int | None = None) -> tuple[dict, dict]:
+    """Make scene `index` and its shard on `threads` Numba threads (default: all); returns its
+    manifest entry and its files, {path relative to `out`: bytes}, written by the caller."""
     import numba
 
     from dpm import load_scene
     from dpm.density.reference import ppm_reference
     from dpm.tracer import build_bvh, trace_photons, trace_visible_points
 
-    numba.set_num_threads(max(1, numba.config.NUMBA_NUM_THREADS // max(1, config.workers)))
+    numba.set_num_threads(threads or numba.config.NUMBA_NUM_THREADS)
     start = time.perf_counter()
-    out = Path(config.out)
-    obj = write_scene(random_scene(index, config.seed, config.width), out / "scenes",
-                      f"dpm training scene {index} (seed {config.seed}), by dpm.data")  # fmt: skip
-    scene = load_scene(obj)
+    files = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        comment = f"dpm training scene {index} (seed {config.seed}), by dpm.data"
+        obj = write_scene(random_scene(index, config.seed, config.width), Path(tmp), comment)
+        for path in sorted(Path(tmp).iterdir()):
+            files[f"scenes/{path.name}"] = path.read_bytes()
+        scene = load_scene(obj)
     bvh = build_bvh(scene)
     camera = scene.camera
     points = trace_visible_points(scene, bvh, camera, 1, config.seed, (0, camera.height))
@@ -119,16 +145,24 @@ def make_shard(config: DataConfig, index: int) -> dict:
         for name in PHOTON_ARRAYS:
             arrays[f"{budget}/{name}"] = getattr(pm, name)
         photons[str(budget)] = len(pm)
-    path = out / "shards" / f"{shard_name(index)}.npz"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic(path) as tmp, tmp.open("wb") as f:
-        np.savez_compressed(f, **arrays)
-    return {
-        "index": index, "file": f"shards/{path.name}", "points": len(keep),
+    shard = f"shards/{shard_name(index)}.npz"
+    files[shard] = npz_bytes(arrays)
+    entry = {
+        "index": index, "file": shard, "points": len(keep),
         "caustic_photons": photons, "reference_noise": ref.noise,
         "reference_caustic_photons": ref.caustic_photons,
         "seconds": time.perf_counter() - start,
     }  # fmt: skip
+    return entry, files
+
+
+def write_files(out: Path, files: dict[str, bytes]) -> None:
+    """Write a shard's files under `out`, each atomically, the shard (.npz) last."""
+    for name in sorted(files, key=lambda n: n.endswith(".npz")):
+        path = out / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic(path) as tmp:
+            tmp.write_bytes(files[name])
 
 
 def read_manifest(out: Path) -> dict | None:
@@ -153,8 +187,14 @@ def write_manifest(out: Path, manifest: dict) -> None:
         tmp.write_text(json.dumps(manifest, indent=1))
 
 
-def build(config: DataConfig, progress: bool = True) -> dict:
-    """Make every missing shard of the set (resuming a killed build); returns the manifest."""
+def build(
+    config: DataConfig,
+    progress: bool = True,
+    make: Callable[[DataConfig, int, int | None], tuple[dict, dict]] = make_shard,
+) -> dict:
+    """Make every missing shard of the set (resuming a killed build), in this process or as
+    Ray tasks (`workers` > 1 or `ray_address`); returns the manifest. `make` makes one
+    scene (tests put faults in it)."""
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
     manifest = read_manifest(out) or {"config": config.identity(), "shards": []}
@@ -165,23 +205,21 @@ def build(config: DataConfig, progress: bool = True) -> dict:
     todo = [i for i in range(config.scenes) if i not in done]
     bar = tqdm(total=config.scenes, initial=config.scenes - len(todo), unit="scene",
                desc="training scenes", disable=not progress)  # fmt: skip
-    if config.workers <= 1:
-        results = (make_shard(config, i) for i in todo)
-        pool = None
-    else:
-        pool = ProcessPoolExecutor(config.workers, mp_context=get_context("spawn"))
-        results = (f.result() for f in as_completed(pool.submit(make_shard, config, i)
-                                                    for i in todo))  # fmt: skip
+    if config.workers <= 1 and not config.ray_address:
+        results = ((i, make(config, i, None)) for i in todo)
+    else:  # a task has one CPU, so one Numba thread
+        jobs = [(config, i, 1) for i in todo]
+        results = fan_out(make, jobs, config.ray_address, config.workers)
     try:
-        for entry in results:
+        for _, (entry, files) in results:
+            write_files(out, files)
             manifest["shards"].append(entry)
             manifest["shards"].sort(key=lambda e: e["index"])
             write_manifest(out, manifest)
             bar.update()
     finally:
         bar.close()
-        if pool is not None:
-            pool.shutdown(cancel_futures=True)
+        results.close()  # stops a Ray runtime this build started
     # a set made for more scenes serves a config asking for fewer: scenes 0 … scenes-1 only
     return {**manifest, "shards": [e for e in manifest["shards"] if e["index"] < config.scenes]}
 

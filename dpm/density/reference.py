@@ -2,7 +2,10 @@
 
 A reference may need billions of photon paths, so it aims emission at the specular surfaces
 (`guided`, which changes no expectation), streams passes, and checkpoints each half to its
-own file. Its noise is reported as the RMSE between the two halves (a comparison whose
+own file; the halves can run at once as two Ray tasks (`dpm.parallel`: local worker
+processes, or a cluster by address, whose tasks need the checkpoint folder on a shared file
+system), with the same result as one after the other. Its noise is reported as the RMSE
+between the two halves (a comparison whose
 differences are below that says nothing). PPM's bias is shared by both halves and does not
 show in that figure; the validation test against the path tracer bounds it.
 """
@@ -17,6 +20,7 @@ import numpy as np
 from dpm.density.ppm import PPM
 from dpm.density.progressive import pass_seed, run_passes
 from dpm.metrics import rmse
+from dpm.parallel import fan_out
 from dpm.scene import Scene
 from dpm.tracer import BVH, VisiblePoints
 
@@ -39,6 +43,21 @@ def caustic_rmse(points: VisiblePoints, estimate: np.ndarray, reference: np.ndar
     return rmse(weight * estimate[hit], weight * reference[hit])
 
 
+def _half(
+    scene: Scene, bvh: BVH, points: VisiblePoints, n_paths: int, radius: float,
+    photons_per_pass: int, seed: int, checkpoint: Path | None, progress: bool,
+) -> tuple[np.ndarray, int, int]:  # fmt: skip
+    """One half's (N, 3) radiance, caustic photons and emitted paths (a whole pass counted
+    whole when a longer run's checkpoint is resumed)."""
+    estimator = PPM(radius=radius, photons_per_pass=photons_per_pass)
+    radiance, state = run_passes(
+        estimator, scene, bvh, points, n_paths, seed,
+        checkpoint=checkpoint, guided=True, progress=progress,
+    )  # fmt: skip
+    longer = state.passes > -(-n_paths // photons_per_pass)
+    return radiance, state.photons, state.passes * photons_per_pass if longer else n_paths
+
+
 def ppm_reference(
     scene: Scene,
     bvh: BVH,
@@ -49,24 +68,24 @@ def ppm_reference(
     seed: int = 0,
     checkpoint_dir: Path | None = None,
     progress: bool = False,
+    workers: int = 1,
+    ray_address: str | None = None,
 ) -> Reference:
-    """Run the two halves of n_paths guided photon paths (resuming from checkpoint_dir)."""
-    estimator = PPM(radius=radius, photons_per_pass=photons_per_pass)
+    """Run the two halves of n_paths guided photon paths (resuming from checkpoint_dir), one
+    after the other, or at once as Ray tasks when `workers` > 1 or `ray_address` is given."""
     if checkpoint_dir is not None:
         checkpoint_dir.mkdir(parents=True, exist_ok=True)
-    halves, photons, paths = [], 0, 0
-    for half in (1, 2):
-        checkpoint = None if checkpoint_dir is None else checkpoint_dir / f"half{half}.npz"
-        radiance, state = run_passes(
-            estimator, scene, bvh, points, n_paths // 2, pass_seed(seed, half),
-            checkpoint=checkpoint, guided=True, progress=progress,
-        )  # fmt: skip
-        halves.append(radiance)
-        photons += state.photons
-        # a checkpoint from a longer run (whole passes) is used whole rather than cut back
-        asked = n_paths // 2
-        longer = state.passes > -(-asked // photons_per_pass)
-        paths += state.passes * photons_per_pass if longer else asked
-    a, b = halves
+    jobs = [
+        (scene, bvh, points, n_paths // 2, radius, photons_per_pass, pass_seed(seed, half),
+         None if checkpoint_dir is None else checkpoint_dir / f"half{half}.npz", progress)
+        for half in (1, 2)
+    ]  # fmt: skip
+    if workers > 1 or ray_address:
+        done = dict(fan_out(_half, jobs, ray_address, min(workers, 2)))
+        halves = [done[0], done[1]]
+    else:
+        halves = [_half(*job) for job in jobs]
+    (a, photons_a, paths_a), (b, photons_b, paths_b) = halves
     mean = ((a.astype(np.float64) + b) / 2).astype(np.float32)
-    return Reference(mean, (a, b), caustic_rmse(points, a, b), paths, photons)
+    noise = caustic_rmse(points, a, b)
+    return Reference(mean, (a, b), noise, paths_a + paths_b, photons_a + photons_b)

@@ -3,7 +3,8 @@
 `train` builds or completes the training set of `[data]` (dpm.data.dataset), then trains the
 network of `[model]` as `[train]` says (dpm.nn.config): each step's batch is drawn from
 (seed, step) alone (dpm.nn.sampler), so a resumed run repeats an uninterrupted one exactly;
-the loss is one of dpm.nn.losses, by default `mse+relmse` balanced against PM-K. The run
+the loss is one of dpm.nn.losses, by default `mse+relmse` balanced against PM-K. Steps are
+data-parallel over every JAX device (dpm.nn.sharding; one CPU device is the plain step). The run
 folder (dpm.nn.run_folder) receives checkpoints every `checkpoint_seconds` and at exit
 (Ctrl-C and SIGTERM included), the metrics, the loss curve and, at the end, `model.msgpack`.
 Relative folders of the config are relative to the working directory; `train` says where
@@ -32,6 +33,7 @@ from dpm.nn.losses import training_loss
 from dpm.nn.model import make_model
 from dpm.nn.run_folder import RunFolder
 from dpm.nn.sampler import Sampler
+from dpm.nn.sharding import DataParallel
 from dpm.nn.weights import Weights, save_weights
 
 
@@ -76,18 +78,22 @@ def train(config: Config, progress: bool = True) -> tuple[dict, list[dict]]:
         print(f"dpm-train: training set in {Path(config.data.out).resolve()}, run in "
               f"{Path(t.out).resolve()} (relative paths are relative to the directory "
               "dpm-train runs from)", file=sys.stderr)  # fmt: skip
+    devices = DataParallel()
+    devices.check("[train] batch", t.batch)
+    devices.check("[train] validation_points", t.validation_points)
     manifest = build(config.data, progress=progress)
     n = len(manifest["shards"])
     sampler = Sampler(config, manifest, list(range(n - t.validation_scenes)))
     validation = Sampler(config, manifest, list(range(n - t.validation_scenes, n)))
-    val_batch, val_target, val_part = validation.draw(np.random.default_rng((t.seed, 1 << 30)),
-                                            t.validation_points,
-                                            max(1, len(validation.choices)))  # fmt: skip
+    val_batch, val_target, val_part = devices.split(
+        validation.draw(np.random.default_rng((t.seed, 1 << 30)), t.validation_points,
+                        max(1, len(validation.choices)))
+    )  # fmt: skip
     run = RunFolder(config)
     model = make_model(m.architecture, m.width)
     optimiser, loss, step = make_steps(model, t.learning_rate, t.loss, t.balance)
-    params = init_params(model, m.k, t.seed)
-    done, params, opt_state, rows = run.restore(params, optimiser.init(params))
+    params = devices.replicate(init_params(model, m.k, t.seed))
+    done, params, opt_state, rows = run.restore(params, devices.replicate(optimiser.init(params)))
     if not rows:  # step 0: the fresh network (for DPM, the uniform kernel: PM-K)
         value = f"{float(loss(params, val_batch, val_target, val_part)):.6g}"
         rows.append({"step": 0, "loss": "", "validation_loss": value, "seconds": "0.00"})
@@ -99,7 +105,8 @@ def train(config: Config, progress: bool = True) -> tuple[dict, list[dict]]:
     try:
 
         def draw(s: int) -> tuple[Batch, np.ndarray, np.ndarray]:
-            return sampler.draw(np.random.default_rng((t.seed, s)), t.batch, t.scenes_per_batch)
+            rng = np.random.default_rng((t.seed, s))
+            return devices.split(sampler.draw(rng, t.batch, t.scenes_per_batch))
 
         ahead = draw(done + 1) if done < t.steps else None
         for s in range(done + 1, t.steps + 1):
