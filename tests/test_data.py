@@ -25,6 +25,7 @@ from dpm.data.dataset import (
 )
 from dpm.data.procedural import random_scene
 from dpm.errors import InputError
+from dpm.parallel import fan_out
 from dpm.scene import DIELECTRIC, DIFFUSE
 
 ROOT = Path(__file__).parent.parent
@@ -143,3 +144,10 @@ def test_a_killed_worker_is_redone_and_the_set_is_the_same(tiny_set, tmp_path: P
         ray.cloudpickle.unregister_pickle_by_value(module)
     assert (tmp_path / "killed").exists()  # a worker did die
     assert_same_set(serial, out)
+
+
+def test_a_tasks_own_error_comes_back_as_itself(tmp_path: Path) -> None:
+    missing = tmp_path / "missing.obj"
+    with pytest.raises(InputError, match="missing.obj") as raised:
+        list(fan_out(load_scene, [(missing,)], cpus=1))  # not retried: it would fail again
+    assert "\n" not in str(raised.value)  # one line, as the CLI prints it
