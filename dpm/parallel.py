@@ -36,6 +36,8 @@ def fan_out(
     except ImportError:
         raise InputError("Ray is not installed (pip install 'ray>=2.40,<3')") from None
     jobs = list(jobs)
+    if not jobs:  # nothing to start a runtime for
+        return
     started = not ray.is_initialized()
     if started:
         try:

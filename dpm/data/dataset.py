@@ -13,15 +13,18 @@ Only this module knows a shard's array names: `load_shard` reads one back as a `
 Each scene depends only on (seed, index), and a shard's bytes only on its arrays (fixed zip
 timestamps), so a set is the same file for file however it was made. `make_shard` writes
 nothing: it returns the scene's files, and `build` writes them atomically and then the
-manifest entry, so a killed build resumes with the scenes it has. With `workers` > 1 or a
-`ray_address` the scenes are made as Ray tasks (`dpm.parallel`: local worker processes, or a
-cluster, which then needs no shared file system); a task whose worker dies is run again.
+manifest entry, so a killed build resumes with the scenes it has. Scenes are made as Ray
+tasks (`dpm.parallel`): by default on a local runtime of one worker per core, `workers` of
+them if set, or on the cluster at `ray_address` (which then needs no shared file system); a
+task whose worker dies is run again. `workers = 1` makes them one after the other in this
+process (small sets, where Ray's few seconds of start cost more than they save).
 """
 
 from __future__ import annotations
 
 import io
 import json
+import os
 import tempfile
 import time
 import zipfile
@@ -60,7 +63,7 @@ class DataConfig:
     reference_radius: float = 5e-4  # PPM initial radius × the scene's bounding diagonal
     reference_paths_per_pass: int = 1_000_000
     seed: int = 0
-    workers: int = 1  # scenes made at once: > 1 runs them as tasks of a local Ray runtime
+    workers: int = 0  # scenes at once on a local Ray runtime; 0: one per core; 1: no Ray
     ray_address: str = ""  # a Ray cluster to make the scenes on instead (workers is ignored)
 
     def identity(self) -> dict:
@@ -192,9 +195,9 @@ def build(
     progress: bool = True,
     make: Callable[[DataConfig, int, int | None], tuple[dict, dict]] = make_shard,
 ) -> dict:
-    """Make every missing shard of the set (resuming a killed build), in this process or as
-    Ray tasks (`workers` > 1 or `ray_address`); returns the manifest. `make` makes one
-    scene (tests put faults in it)."""
+    """Make every missing shard of the set (resuming a killed build), as Ray tasks or, with
+    `workers` = 1 and no `ray_address`, in this process; returns the manifest. `make` makes
+    one scene (tests put faults in it)."""
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
     manifest = read_manifest(out) or {"config": config.identity(), "shards": []}
@@ -205,11 +208,11 @@ def build(
     todo = [i for i in range(config.scenes) if i not in done]
     bar = tqdm(total=config.scenes, initial=config.scenes - len(todo), unit="scene",
                desc="training scenes", disable=not progress)  # fmt: skip
-    if config.workers <= 1 and not config.ray_address:
+    if config.workers == 1 and not config.ray_address:
         results = ((i, make(config, i, None)) for i in todo)
     else:  # a task has one CPU, so one Numba thread
         jobs = [(config, i, 1) for i in todo]
-        results = fan_out(make, jobs, config.ray_address, config.workers)
+        results = fan_out(make, jobs, config.ray_address, config.workers or os.cpu_count() or 1)
     try:
         for _, (entry, files) in results:
             write_files(out, files)

@@ -112,9 +112,11 @@ def load_config(path: str | Path) -> Config:
                          f"than the {d.scenes} scenes of [data]")  # fmt: skip
     if not d.budgets or min(d.budgets) < 1 or not t.learning_rate > 0:
         raise InputError(f"{path}: [data] budgets and [train] learning_rate must be positive")
-    for key in ("reference_paths", "reference_paths_per_pass", "workers"):
+    for key in ("reference_paths", "reference_paths_per_pass"):
         if getattr(d, key) < 1:
             raise InputError(f"{path}: [data] {key} must be at least 1")
+    if d.workers < 0:
+        raise InputError(f"{path}: [data] workers must be 0 (one per core), 1 (no Ray) or more")
     if not 0 < d.reference_radius < 1:
         raise InputError(f"{path}: [data] reference_radius must be in (0, 1): a fraction of "
                          "the scene's diagonal")  # fmt: skip
