@@ -40,9 +40,10 @@ def _rays(
     d = np.ascontiguousarray(directions, dtype=np.float64).reshape(-1, 3)
     if o.shape != d.shape:
         raise ValueError(f"origins {o.shape} and directions {d.shape} differ in shape")
-    if not (np.all(np.isfinite(o)) and np.all(np.isfinite(d))):
+    # cheap tests first (one sum, one count); the row-wise ones run only when they fire
+    if not np.isfinite(o.sum() + d.sum()) and not (np.isfinite(o).all() and np.isfinite(d).all()):
         raise ValueError("ray origins and directions must be finite")
-    if np.any(np.all(d == 0, axis=1)):
+    if np.count_nonzero(d == 0) and np.any(np.all(d == 0, axis=1)):
         raise ValueError("ray directions must be non-zero")
     t = np.full(len(o), np.inf) if tmax is None else np.broadcast_to(tmax, (len(o),))
     return o, d, np.ascontiguousarray(t, dtype=np.float64)

@@ -1,10 +1,14 @@
-"""Bounding volume hierarchy over triangles: binned-SAH build into flat node arrays.
+"""Bounding volume hierarchy over triangles: binned-SAH binary build, collapsed to 8-wide nodes.
 
-Layout: only interior nodes are stored, each as one 64-byte record (one cache line) holding
-the boxes of both children: columns 0–11 as float32 (left min, max xyz; right min, max xyz)
-and columns 12–15 as int32. For child c in (0, 1) of node i, `kids[i, 14 + c]` is 0 when the
-child is an interior node with index `kids[i, 12 + c]`, or the triangle count of a leaf whose
-triangles are rows `kids[i, 12 + c] ...` of `tri_verts` (BVH order). Node 0 is the root.
+Layout: only interior nodes are stored, each as one 256-byte record (four cache lines, 64-byte
+aligned) holding the boxes of its WIDTH = 8 children as structure of arrays, so one ray is
+tested against all eight at once (`traverse._box_test`). Seen as float32, columns
+WIDTH·p + c hold plane p of child c's box, planes 0–2 being min x, y, z and 3–5 max x, y, z.
+Seen as int32, column REFS + c (REFS = 6·WIDTH) is child c's reference: an interior node's
+record index (≥ 0), or for a leaf ~(first << LEAF_BITS | count), the leaf's triangles being
+rows first ... first + count - 1 of `tri_verts` (BVH order). An empty slot has an inverted box
+(min inf, max -inf) that no ray enters, and reference EMPTY. The last WIDTH columns are
+padding. Record 0 is the root.
 """
 
 from __future__ import annotations
@@ -17,16 +21,23 @@ import numpy as np
 
 N_BINS = 16
 MAX_LEAF = 8  # a node with more triangles is always split
-TRAVERSAL_COST = 1.0  # SAH cost of one box test relative to one triangle test
+TRAVERSAL_COST = 2.0  # SAH cost of one binary node relative to one triangle test
+WIDTH = 8  # children per node
+REFS = 6 * WIDTH  # first column of the child references (after six planes of WIDTH floats)
+RECORD = 8 * WIDTH  # 4-byte columns per node record (two of padding per child)
+assert MAX_LEAF <= WIDTH  # a leaf's triangles are tested together, one per SIMD lane
+LEAF_BITS = 4  # low bits of a leaf reference that hold its triangle count (≤ MAX_LEAF)
+EMPTY = ~0  # reference of an empty child slot: a leaf of no triangles
 
 
 class BVHArrays(NamedTuple):
     """The arrays Numba kernels traverse; pass `bvh.arrays` into any tracer kernel."""
 
-    bounds: np.ndarray  # (nodes, 16) float32 view of the node records (columns 0–11 used)
-    kids: np.ndarray  # (nodes, 16) int32 view of the same memory (columns 12–15 used)
+    bounds: np.ndarray  # (nodes, RECORD) float32 view of the node records (boxes)
+    kids: np.ndarray  # (nodes, RECORD) int32 view of the same memory (child references)
     tri_verts: np.ndarray  # (T, 9) float32 triangle vertices v0, v1, v2 in BVH order
     tri_index: np.ndarray  # (T,) int32 scene triangle index of each BVH-order triangle
+    tri_planes: np.ndarray  # (9, T + WIDTH) float32 tri_verts transposed, zero-padded
 
 
 @dataclass(frozen=True)
@@ -34,7 +45,7 @@ class BVH:
     """A built BVH: node arrays plus the depth needed to size traversal stacks."""
 
     arrays: BVHArrays
-    depth: int  # number of levels; traversal stacks need depth + 1 entries
+    depth: int  # levels of WIDTH-wide nodes; `traverse.new_stack(depth)` sizes a stack for them
 
     @property
     def n_nodes(self) -> int:
@@ -170,33 +181,76 @@ def _build(tri_lo, tri_hi, centroid, n_bins, max_leaf, traversal_cost):
 
 
 @nb.njit(cache=True)
-def _pack(bounds, child, count):
-    """Depth-first nodes (left = i + 1, right = child[i]) into the two-boxes-per-node layout."""
+def _collapse(bounds, child, count):
+    """Binary depth-first nodes (left = i + 1, right = child[i]) into WIDTH-wide node records.
+
+    Each binary interior node that becomes a wide node takes as children its own two, then
+    repeatedly the two children of its largest-area interior child, until it has WIDTH or only
+    leaves. Children of a node get consecutive indices. Returns (records, levels).
+    """
     n = bounds.shape[0]
-    if count[0] > 0:  # the root is a leaf: one node whose two children are that same leaf
-        packed = np.empty((1, 12), np.float32)
-        packed[0, :6] = bounds[0]
-        packed[0, 6:] = bounds[0]
-        kids = np.array([[child[0], child[0], count[0], count[0]]], np.int32)
-        return packed, kids
-    inner = np.full(n, -1, np.int64)
-    k = 0
-    for i in range(n):
-        if count[i] == 0:
-            inner[i] = k
+    records = np.zeros((max(n, 1), RECORD), np.int32)
+    boxes = records.view(np.float32)
+    work = np.empty((n + 1, 3), np.int64)  # (binary node, record, level)
+    work[0, 0], work[0, 1], work[0, 2] = 0, 0, 1
+    sp, n_rec, levels = 1, 1, 1
+    pick = np.empty(WIDTH, np.int64)
+    while sp > 0:
+        sp -= 1
+        b, rec, level = work[sp, 0], work[sp, 1], work[sp, 2]
+        levels = max(levels, level)
+        if count[b] > 0:  # only when the root is a leaf
+            pick[0], k = b, 1
+        else:
+            pick[0], pick[1], k = b + 1, child[b], 2
+        while k < WIDTH:
+            best, best_area = -1, -1.0
+            for j in range(k):
+                c = pick[j]
+                if count[c] == 0:
+                    lo, hi = bounds[c, :3], bounds[c, 3:]
+                    area = _half_area(lo[0], lo[1], lo[2], hi[0], hi[1], hi[2])
+                    if area > best_area:
+                        best, best_area = j, area
+            if best < 0:
+                break
+            c = pick[best]
+            for j in range(k, best + 1, -1):  # keep the children in their left-to-right order
+                pick[j] = pick[j - 1]
+            pick[best], pick[best + 1] = c + 1, child[c]
             k += 1
-    packed = np.empty((k, 12), np.float32)
-    kids = np.empty((k, 4), np.int32)
-    for i in range(n):
-        if count[i] > 0:
-            continue
-        j = inner[i]
-        for c in range(2):
-            sub = i + 1 if c == 0 else np.int64(child[i])
-            packed[j, 6 * c : 6 * c + 6] = bounds[sub]
-            kids[j, c] = inner[sub] if count[sub] == 0 else child[sub]
-            kids[j, 2 + c] = count[sub]
-    return packed, kids
+        first_new = n_rec
+        for j in range(WIDTH):
+            if j >= k:  # an empty slot: an inverted box no ray enters
+                for a in range(3):
+                    boxes[rec, WIDTH * a + j] = np.inf
+                    boxes[rec, WIDTH * (3 + a) + j] = -np.inf
+                records[rec, REFS + j] = EMPTY
+                continue
+            c = pick[j]
+            for a in range(3):
+                boxes[rec, WIDTH * a + j] = bounds[c, a]
+                boxes[rec, WIDTH * (3 + a) + j] = bounds[c, 3 + a]
+            if count[c] > 0:
+                records[rec, REFS + j] = ~((child[c] << LEAF_BITS) | count[c])
+            else:
+                records[rec, REFS + j] = n_rec
+                n_rec += 1
+        # Push the interior children last-first, so the first is expanded next.
+        for j in range(k - 1, -1, -1):
+            r = records[rec, REFS + j]
+            if r >= first_new:
+                work[sp, 0], work[sp, 1], work[sp, 2] = pick[j], r, level + 1
+                sp += 1
+    return records[:n_rec].copy(), levels
+
+
+def _aligned(shape: tuple[int, int], dtype) -> np.ndarray:
+    """An empty C-contiguous array whose data starts on a 64-byte (cache-line) boundary."""
+    size = shape[0] * shape[1] * np.dtype(dtype).itemsize
+    raw = np.empty(size + 64, np.uint8)
+    start = -raw.ctypes.data % 64
+    return raw[start : start + size].view(dtype).reshape(shape)
 
 
 def build_bvh_from_triangles(triangles: np.ndarray) -> BVH:
@@ -204,8 +258,10 @@ def build_bvh_from_triangles(triangles: np.ndarray) -> BVH:
     tri = np.ascontiguousarray(triangles, dtype=np.float32).reshape(-1, 3, 3)
     if len(tri) == 0:
         raise ValueError("cannot build a BVH over zero triangles")
+    if len(tri) >= 2 ** (31 - LEAF_BITS):
+        raise ValueError(f"at most {2 ** (31 - LEAF_BITS) - 1} triangles per BVH")
     tri64 = tri.astype(np.float64)
-    bounds, child, count, order, depth = _build(
+    bounds, child, count, order, _ = _build(
         tri64.min(axis=1),
         tri64.max(axis=1),
         tri64.mean(axis=1),
@@ -213,19 +269,19 @@ def build_bvh_from_triangles(triangles: np.ndarray) -> BVH:
         MAX_LEAF,
         TRAVERSAL_COST,
     )
-    packed, kids = _pack(bounds, child, count)
-    # One 64-byte-aligned record per node, seen both as float32 (boxes) and int32 (children).
-    n = len(kids)
-    raw = np.empty(n * 16 + 16, np.int32)
-    start = (-raw.ctypes.data % 64) // 4
-    nodes = raw[start : start + n * 16].reshape(n, 16)
-    nodes[:, 12:] = kids
-    records = nodes.view(np.float32)
-    records[:, :12] = packed
+    records, levels = _collapse(bounds, child, count)
+    nodes = _aligned(records.shape, np.int32)
+    nodes[:] = records
+    verts = np.ascontiguousarray(tri[order].reshape(-1, 9))
+    # Plane-major copy: a leaf's triangles are WIDTH consecutive floats per coordinate.
+    planes = _aligned((9, len(verts) + WIDTH), np.float32)
+    planes[:, : len(verts)] = verts.T
+    planes[:, len(verts) :] = 0.0
     arrays = BVHArrays(
-        bounds=records,
+        bounds=nodes.view(np.float32),
         kids=nodes,
-        tri_verts=np.ascontiguousarray(tri[order].reshape(-1, 9)),
+        tri_verts=verts,
         tri_index=order,
+        tri_planes=planes,
     )
-    return BVH(arrays=arrays, depth=int(depth))
+    return BVH(arrays=arrays, depth=int(levels))

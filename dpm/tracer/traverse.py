@@ -1,19 +1,31 @@
 """Ray queries: the watertight ray–triangle test and closest-hit / any-hit BVH traversal.
 
 The single-ray functions (`closest_hit`, `any_hit`) are what other Numba kernels call inside
-their own `prange` loops; the `*_batch` kernels run them over arrays of rays.
-Arithmetic is float64 on float32 geometry, with no fastmath: watertightness needs exact IEEE.
+their own `prange` loops (they inline there); the `*_batch` kernels run them over arrays of
+rays. Arithmetic is float64 on float32 geometry, with no fastmath: watertightness needs exact
+IEEE. Traversal tests a node's WIDTH child boxes (`_box_test`) and a leaf's up to WIDTH
+triangles (`_leaf_test`) in SIMD lanes through LLVM intrinsics; each lane does exactly the
+float64 operations of the scalar `hit_box` / `hit_triangle`, in the same order.
 """
 
 from __future__ import annotations
 
 import numba as nb
 import numpy as np
+from llvmlite import ir
+from numba.core import types
+from numba.extending import intrinsic
 
 from dpm.scene import Scene
+from dpm.tracer.bvh import LEAF_BITS, REFS, WIDTH
 
 # pbrt's robust-slab factor 1 + 2·γ(3) for float64, so box tests never cull a true hit.
 _SLAB_SCALE = 1.0 + 2.0 * (3 * 2.0**-53) / (1 - 3 * 2.0**-53)
+# Boxes are entered up to this factor beyond the nearest hit so far: two triangles sharing an
+# edge can give distances a few ulps apart for the same point, and the nearer one must still be
+# found however the boxes split them, so the BVH returns the brute-force minimum.
+_CULL_SCALE = 1.0 + 2.0**-32
+_COUNT = (1 << LEAF_BITS) - 1  # mask of a leaf reference's triangle count
 SPAWN_OFFSET = 1e-6  # new rays start this fraction of the scene diagonal off their surface
 RAYS_PER_TASK = 256  # rays each parallel task traces with one traversal stack
 
@@ -68,17 +80,185 @@ def hit_triangle(v, i, ox, oy, oz, kx, ky, kz, sx, sy, sz, tmax):
     return tscaled / det
 
 
+def _cast(context, builder, sig, args, which, to):
+    """Arguments number `which` of an intrinsic, converted to Numba type `to`."""
+    return [context.cast(builder, args[i], sig.args[i], to) for i in which]
+
+
+def _box_test_codegen(context, builder, sig, args):
+    """LLVM IR of `_box_test`: the slab test of `_slab` on WIDTH float64 lanes at once."""
+    offsets = _cast(context, builder, sig, args, range(2, 8), types.int64)
+    ox, oy, oz, ix, iy, iz, tmax = _cast(context, builder, sig, args, range(8, 15), types.float64)
+    f32, f64, i8, i32, i64 = (ir.FloatType(), ir.DoubleType()) + tuple(map(ir.IntType, (8, 32, 64)))
+    vf32, vf64 = ir.VectorType(f32, WIDTH), ir.VectorType(f64, WIDTH)
+    array = context.make_array(sig.args[0])(context, builder, args[0])
+    row_bytes = builder.extract_value(array.strides, 0)
+    node = context.cast(builder, args[1], sig.args[1], types.int64)
+    row = builder.gep(builder.bitcast(array.data, i8.as_pointer()), [builder.mul(node, row_bytes)])
+    row = builder.bitcast(row, f32.as_pointer())
+
+    def splat(x):
+        v = builder.insert_element(ir.Constant(vf64, ir.Undefined), x, ir.Constant(i32, 0))
+        return builder.shuffle_vector(v, v, ir.Constant(ir.VectorType(i32, WIDTH), [0] * WIDTH))
+
+    def plane(column, o, inv):
+        ptr = builder.bitcast(builder.gep(row, [column]), vf32.as_pointer())
+        x = builder.fpext(builder.load(ptr, align=4), vf64)
+        return builder.fmul(builder.fsub(x, splat(o)), splat(inv))
+
+    t0 = ir.Constant(vf64, [0.0] * WIDTH)
+    t1 = splat(tmax)
+    scale = ir.Constant(vf64, [_SLAB_SCALE] * WIDTH)
+    axes = zip(offsets[:3], offsets[3:], (ox, oy, oz), (ix, iy, iz), strict=True)
+    for near_col, far_col, o, inv in axes:
+        near = plane(near_col, o, inv)
+        far = builder.fmul(plane(far_col, o, inv), scale)
+        # Compare-and-select like `_slab`: a NaN bound leaves the interval alone.
+        t0 = builder.select(builder.fcmp_ordered(">", near, t0), near, t0)
+        t1 = builder.select(builder.fcmp_ordered("<", far, t1), far, t1)
+    hit = builder.fcmp_ordered("<=", t0, t1)
+    mask = builder.zext(builder.bitcast(hit, ir.IntType(WIDTH)), i64)
+    bits = builder.bitcast(t0, ir.VectorType(i64, WIDTH))
+    lanes = [builder.extract_element(bits, ir.Constant(i32, c)) for c in range(WIDTH)]
+    return context.make_tuple(builder, sig.return_type, [mask, *lanes])
+
+
+@intrinsic
+def _box_test(typingctx, bounds, node, nx, ny, nz, fx, fy, fz, ox, oy, oz, ix, iy, iz, tmax):
+    """(mask, d_0, ..., d_WIDTH-1): which child boxes of a node record the ray enters before
+    tmax (bit c for child c), and the bits of each entry distance (`_bits`; valid if entered).
+
+    Columns nx, ny, nz of the node record hold the WIDTH near planes of each axis for the ray
+    (the min planes where the direction is positive, the max planes where negative) and
+    fx, fy, fz the far ones. Per lane this is exactly `hit_box`, with the same float64
+    operations in the same order.
+    """
+    sig = types.UniTuple(types.int64, WIDTH + 1)(
+        bounds, node, nx, ny, nz, fx, fy, fz, ox, oy, oz, ix, iy, iz, tmax
+    )
+    return sig, _box_test_codegen
+
+
+def _leaf_test_codegen(context, builder, sig, args):
+    """LLVM IR of `_leaf_test`: `hit_triangle` on WIDTH float64 lanes at once."""
+    planes = args[0]
+    first, count, kx, ky, kz = _cast(context, builder, sig, args, range(1, 6), types.int64)
+    okx, oky, okz, sx, sy, sz, tmax = _cast(
+        context, builder, sig, args, range(6, 13), types.float64
+    )
+    f32, f64, i8, i32, i64 = (ir.FloatType(), ir.DoubleType()) + tuple(map(ir.IntType, (8, 32, 64)))
+    vf32, vf64 = ir.VectorType(f32, WIDTH), ir.VectorType(f64, WIDTH)
+    array = context.make_array(sig.args[0])(context, builder, planes)
+    row_bytes = builder.extract_value(array.strides, 0)
+    base = builder.gep(
+        builder.bitcast(array.data, i8.as_pointer()), [builder.mul(first, ir.Constant(i64, 4))]
+    )
+
+    def splat(x):
+        v = builder.insert_element(ir.Constant(vf64, ir.Undefined), x, ir.Constant(i32, 0))
+        return builder.shuffle_vector(v, v, ir.Constant(ir.VectorType(i32, WIDTH), [0] * WIDTH))
+
+    def coord(vertex, k, o):
+        """Lanes of (vertex coordinate k) - o, as `hit_triangle` forms a[k] = v[i, k] - o[k]."""
+        row = builder.add(ir.Constant(i64, 3 * vertex), k)
+        ptr = builder.gep(base, [builder.mul(row, row_bytes)])
+        x = builder.load(builder.bitcast(ptr, vf32.as_pointer()), align=4)
+        return builder.fsub(builder.fpext(x, vf64), splat(o))
+
+    fsx, fsy, fsz, ftmax = splat(sx), splat(sy), splat(sz), splat(tmax)
+    zero = ir.Constant(vf64, [0.0] * WIDTH)
+    sheared = []
+    for vertex in range(3):
+        ex, ey, ez = coord(vertex, kx, okx), coord(vertex, ky, oky), coord(vertex, kz, okz)
+        sheared.append(
+            (builder.fadd(ex, builder.fmul(fsx, ez)), builder.fadd(ey, builder.fmul(fsy, ez)), ez)
+        )
+    (a_x, a_y, a_z), (b_x, b_y, b_z), (c_x, c_y, c_z) = sheared
+    e0 = builder.fsub(builder.fmul(b_x, c_y), builder.fmul(b_y, c_x))
+    e1 = builder.fsub(builder.fmul(c_x, a_y), builder.fmul(c_y, a_x))
+    e2 = builder.fsub(builder.fmul(a_x, b_y), builder.fmul(a_y, b_x))
+
+    def cmp(op, x, y):
+        return builder.fcmp_ordered(op, x, y)
+
+    def any3(op):
+        return builder.or_(builder.or_(cmp(op, e0, zero), cmp(op, e1, zero)), cmp(op, e2, zero))
+
+    miss = builder.and_(any3("<"), any3(">"))
+    det = builder.fadd(builder.fadd(e0, e1), e2)
+    miss = builder.or_(miss, cmp("==", det, zero))
+    tsum = builder.fadd(
+        builder.fadd(builder.fmul(e0, a_z), builder.fmul(e1, b_z)), builder.fmul(e2, c_z)
+    )
+    tscaled = builder.fmul(fsz, tsum)
+    tdet = builder.fmul(ftmax, det)
+    neg = builder.or_(cmp(">=", tscaled, zero), cmp("<", tscaled, tdet))
+    pos = builder.or_(cmp("<=", tscaled, zero), cmp(">", tscaled, tdet))
+    miss = builder.or_(miss, builder.and_(cmp("<", det, zero), neg))
+    miss = builder.or_(miss, builder.and_(cmp(">", det, zero), pos))
+    t = builder.fdiv(tscaled, det)
+    lane = ir.Constant(ir.VectorType(i64, WIDTH), list(range(WIDTH)))
+    counts = builder.insert_element(
+        ir.Constant(ir.VectorType(i64, WIDTH), ir.Undefined), count, ir.Constant(i32, 0)
+    )
+    counts = builder.shuffle_vector(
+        counts, counts, ir.Constant(ir.VectorType(i32, WIDTH), [0] * WIDTH)
+    )
+    live = builder.icmp_signed("<", lane, counts)
+    hit = builder.and_(builder.and_(live, builder.not_(miss)), cmp("<", t, ftmax))
+    mask = builder.uitofp(builder.zext(builder.bitcast(hit, ir.IntType(WIDTH)), i64), f64)
+    lanes = [builder.extract_element(t, ir.Constant(i32, c)) for c in range(WIDTH)]
+    return context.make_tuple(builder, sig.return_type, [mask, *lanes])
+
+
+@intrinsic
+def _leaf_test(typingctx, planes, first, count, kx, ky, kz, okx, oky, okz, sx, sy, sz, tmax):
+    """(mask, t_0, ..., t_WIDTH-1): `hit_triangle` for triangles first ... first + count - 1
+    (count ≤ WIDTH) at once, from the plane-major copy `tri_planes` of their vertices.
+
+    okx, oky, okz are the ray origin's coordinates kx, ky, kz. Bit j of mask (a float64
+    holding a small integer) is set where triangle first + j is hit strictly before tmax, at
+    distance t_j; per lane the float64 operations are those of `hit_triangle`, in its order.
+    """
+    sig = types.UniTuple(types.float64, WIDTH + 1)(
+        planes, first, count, kx, ky, kz, okx, oky, okz, sx, sy, sz, tmax
+    )
+    return sig, _leaf_test_codegen
+
+
+@intrinsic
+def _bits(typingctx, x):
+    """The IEEE bits of float64 x as an int64: for x ≥ 0 (and +inf) they order as x does."""
+
+    def codegen(context, builder, sig, args):
+        return builder.bitcast(args[0], ir.IntType(64))
+
+    return types.int64(types.float64), codegen
+
+
+@intrinsic
+def _lowest_bit(typingctx, mask):
+    """Index of the lowest set bit of a non-zero int64."""
+
+    def codegen(context, builder, sig, args):
+        return builder.cttz(args[0], ir.Constant(ir.IntType(1), 1))
+
+    return types.int64(types.int64), codegen
+
+
 @nb.njit(cache=True, inline="always")
 def _slab(lo, hi, o, inv, t0, t1):
     """Clip the interval (t0, t1) by one axis' slab [lo, hi].
 
     Written with comparisons, not min/max, so a NaN bound (a ray lying in a box face, where
-    0·inf appears) leaves the interval alone rather than turning into a miss.
+    0·inf appears) leaves the interval alone rather than turning into a miss. The near and far
+    planes are chosen by the sign of inv (inv = ±inf for a zero direction component, -inf for
+    -0.0), never by comparing the two distances, which a NaN would defeat.
     """
+    if inv < 0:
+        lo, hi = hi, lo
     near = (lo - o) * inv
     far = (hi - o) * inv
-    if near > far:
-        near, far = far, near
     if near > t0:
         t0 = near
     if far * _SLAB_SCALE < t1:
@@ -87,111 +267,143 @@ def _slab(lo, hi, o, inv, t0, t1):
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
-def hit_box(bounds, node, at, ox, oy, oz, ix, iy, iz, tmax):
-    """Entry distance into the box bounds[node, at:at+6] if entered before tmax, else inf."""
-    t0, t1 = _slab(bounds[node, at], bounds[node, at + 3], ox, ix, 0.0, tmax)
-    t0, t1 = _slab(bounds[node, at + 1], bounds[node, at + 4], oy, iy, t0, t1)
-    t0, t1 = _slab(bounds[node, at + 2], bounds[node, at + 5], oz, iz, t0, t1)
+def hit_box(lo, hi, ox, oy, oz, ix, iy, iz, tmax):
+    """Entry distance into the box [lo, hi] (two 3-sequences) if entered before tmax, else inf."""
+    t0, t1 = _slab(lo[0], hi[0], ox, ix, 0.0, tmax)
+    t0, t1 = _slab(lo[1], hi[1], oy, iy, t0, t1)
+    t0, t1 = _slab(lo[2], hi[2], oz, iz, t0, t1)
     return t0 if t0 <= t1 else np.inf
 
 
 @nb.njit(cache=True, inline="always")
-def _hit_leaf(verts, first, n, ray, best_t, best):
-    """Nearest of (best_t, best) and the hits on triangles first..first+n-1 of a leaf."""
-    ox, oy, oz, kx, ky, kz, sx, sy, sz = ray
-    for i in range(first, first + n):
-        t = hit_triangle(verts, i, ox, oy, oz, kx, ky, kz, sx, sy, sz, best_t)
-        if t < best_t:
-            best_t, best = t, i
-    return best_t, best
+def _planes(ix, iy, iz):
+    """Record columns of the near and far planes of the child boxes, per axis."""
+    nx = 3 * WIDTH if ix < 0 else 0
+    ny = 4 * WIDTH if iy < 0 else WIDTH
+    nz = 5 * WIDTH if iz < 0 else 2 * WIDTH
+    return nx, ny, nz, 3 * WIDTH - nx, 5 * WIDTH - ny, 7 * WIDTH - nz
 
 
 @nb.njit(cache=True)
 def new_stack(depth):
-    """Traversal scratch for one thread: (depth + 1, 2) float64 rows of (node, entry t)."""
-    return np.empty((depth + 1, 2), np.float64)
+    """Traversal scratch for one thread: int64 rows of (node reference, entry distance bits).
+
+    A wide node pushes at most WIDTH - 1 more entries than it pops, per level of `depth`.
+    """
+    return np.empty(((WIDTH - 1) * depth + 1, 2), np.int64)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True, inline="always", error_model="numpy")
 def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     """(t, scene triangle index) of the nearest hit in (0, tmax), or (inf, -1).
 
-    `bvh` is a BVHArrays; `stack` is scratch from `new_stack` (node index, entry distance).
+    `bvh` is a BVHArrays; `stack` is scratch from `new_stack`.
     """
-    bounds, kids, verts = bvh.bounds, bvh.kids, bvh.tri_verts
+    bounds, kids, planes = bvh.bounds, bvh.kids, bvh.tri_planes
     kx, ky, kz, sx, sy, sz = ray_setup(dx, dy, dz)
-    ray = (ox, oy, oz, kx, ky, kz, sx, sy, sz)
+    origin = (ox, oy, oz)
+    o = (origin[kx], origin[ky], origin[kz])
     ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
+    nx, ny, nz, fx, fy, fz = _planes(ix, iy, iz)
     best_t, best = tmax, -1
-    node, sp = 0, 0
+    far = best_t * _CULL_SCALE
+    cull = _bits(far)
+    ref, sp = 0, 0
     while True:
-        tl = hit_box(bounds, node, 0, ox, oy, oz, ix, iy, iz, best_t)
-        tr = hit_box(bounds, node, 6, ox, oy, oz, ix, iy, iz, best_t)
-        left, right = kids[node, 12], kids[node, 13]
-        n_left, n_right = kids[node, 14], kids[node, 15]
-        # Leaf children are intersected right away, the nearer one first.
-        if n_left > 0 and n_right > 0 and tr < tl:
-            left, right, n_left, n_right, tl, tr = right, left, n_right, n_left, tr, tl
-        # A miss is inf, and best_t may be inf too: a child counts only if finite and ≤ best_t.
-        if n_left > 0:
-            if tl < np.inf and tl <= best_t:
-                best_t, best = _hit_leaf(verts, left, n_left, ray, best_t, best)
-            tl = np.inf
-        if n_right > 0:
-            if tr < np.inf and tr <= best_t:
-                best_t, best = _hit_leaf(verts, right, n_right, ray, best_t, best)
-            tr = np.inf
-        go_left = tl < np.inf and tl <= best_t
-        go_right = tr < np.inf and tr <= best_t
-        if go_left and go_right:
-            if tr < tl:
-                left, right, tl, tr = right, left, tr, tl
-            stack[sp, 0] = right  # the farther child waits, with its entry distance
-            stack[sp, 1] = tr
-            sp += 1
-            node = left
-            continue
-        if go_left:
-            node = left
-            continue
-        if go_right:
-            node = right
-            continue
+        if ref >= 0:
+            hits = _box_test(bounds, ref, nx, ny, nz, fx, fy, fz, ox, oy, oz, ix, iy, iz, far)
+            m = hits[0]
+            if m != 0:
+                dist = hits[1:]
+                c = _lowest_bit(m)
+                m &= m - 1
+                if m == 0:  # one child entered: descend, no stack traffic
+                    ref = kids[ref, REFS + c]
+                    continue
+                c2 = _lowest_bit(m)
+                m &= m - 1
+                a, da, b, db = kids[ref, REFS + c], dist[c], kids[ref, REFS + c2], dist[c2]
+                if db < da:
+                    a, da, b, db = b, db, a, da
+                if m == 0:  # two: descend into the nearer, the farther waits
+                    stack[sp, 0], stack[sp, 1] = b, db
+                    sp += 1
+                    ref = a
+                    continue
+                # Three or more: push them all, sorted so the nearest is on top, and pop it.
+                stack[sp, 0], stack[sp, 1] = b, db
+                stack[sp + 1, 0], stack[sp + 1, 1] = a, da
+                base = sp
+                sp += 2
+                while m != 0:
+                    c = _lowest_bit(m)
+                    m &= m - 1
+                    dc = dist[c]
+                    j = sp
+                    while j > base and stack[j - 1, 1] < dc:
+                        stack[j, 0], stack[j, 1] = stack[j - 1, 0], stack[j - 1, 1]
+                        j -= 1
+                    stack[j, 0], stack[j, 1] = kids[ref, REFS + c], dc
+                    sp += 1
+                sp -= 1
+                ref = stack[sp, 0]
+                continue
+        else:
+            code = ~ref
+            first = code >> LEAF_BITS
+            hits = _leaf_test(planes, first, code & _COUNT, kx, ky, kz, *o, sx, sy, sz, best_t)
+            m = int(hits[0])
+            if m != 0:
+                ts = hits[1:]
+                while m != 0:  # lanes in triangle order: the first of equal nearest ones wins
+                    c = _lowest_bit(m)
+                    m &= m - 1
+                    if ts[c] < best_t:
+                        best_t, best = ts[c], first + c
+                far = best_t * _CULL_SCALE
+                cull = _bits(far)
         # Pop the next subtree that may still hold a nearer hit.
-        while sp > 0 and stack[sp - 1, 1] > best_t:
+        while sp > 0 and stack[sp - 1, 1] > cull:
             sp -= 1
         if sp == 0:
             break
         sp -= 1
-        node = int(stack[sp, 0])
+        ref = stack[sp, 0]
     if best < 0:
         return np.inf, -1
     return best_t, bvh.tri_index[best]
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True, inline="always", error_model="numpy")
 def any_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     """True if the ray hits any triangle at a distance in (0, tmax)."""
-    bounds, kids, verts = bvh.bounds, bvh.kids, bvh.tri_verts
+    bounds, kids, planes = bvh.bounds, bvh.kids, bvh.tri_planes
     kx, ky, kz, sx, sy, sz = ray_setup(dx, dy, dz)
+    origin = (ox, oy, oz)
+    o = (origin[kx], origin[ky], origin[kz])
     ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
+    nx, ny, nz, fx, fy, fz = _planes(ix, iy, iz)
+    far = tmax * _CULL_SCALE
     stack[0, 0] = 0
     sp = 1
     while sp > 0:
         sp -= 1
-        node = int(stack[sp, 0])
-        for c in range(2):
-            if hit_box(bounds, node, 6 * c, ox, oy, oz, ix, iy, iz, tmax) == np.inf:
-                continue
-            ref, n = kids[node, 12 + c], kids[node, 14 + c]
-            if n == 0:
+        node = stack[sp, 0]
+        m = _box_test(bounds, node, nx, ny, nz, fx, fy, fz, ox, oy, oz, ix, iy, iz, far)[0]
+        while m != 0:
+            c = _lowest_bit(m)
+            m &= m - 1
+            ref = kids[node, REFS + c]
+            if ref >= 0:
                 stack[sp, 0] = ref
                 sp += 1
                 continue
-            for i in range(ref, ref + n):
-                # hit_triangle admits t == tmax; hits count only strictly before tmax.
-                if hit_triangle(verts, i, ox, oy, oz, kx, ky, kz, sx, sy, sz, tmax) < tmax:
-                    return True
+            code = ~ref
+            first = code >> LEAF_BITS
+            # Hits count only strictly before tmax (hit_triangle admits t == tmax).
+            hits = _leaf_test(planes, first, code & _COUNT, kx, ky, kz, *o, sx, sy, sz, tmax)
+            if hits[0] != 0:
+                return True
     return False
 
 
