@@ -80,10 +80,11 @@ def kernel_radiance(params: dict, b: Batch) -> jnp.ndarray:
         h = jax.nn.relu(_dense(p["Extractor_0"][name], h))
     width = h.shape[-1]
     h3 = h.reshape(n, k, width)
-    valid = b.valid[:, :, None]
-    biggest = jnp.max(jnp.where(valid, h3, -jnp.inf), axis=1)
-    biggest = jnp.where(b.valid.any(axis=1)[:, None], biggest, 0.0)
-    mean = jnp.sum(jnp.where(valid, h3, 0.0), axis=1) / jnp.maximum(b.valid.sum(1), 1)[:, None]
+    # ReLU features are ≥ 0, so zeroing the invalid photons leaves the max over the valid
+    # ones (and 0 when none is valid, as the Extractor does), with one masked array
+    masked = h3 * b.valid[:, :, None]
+    biggest = jnp.max(masked, axis=1)
+    mean = jnp.sum(masked, axis=1) / jnp.maximum(b.valid.sum(1), 1)[:, None]
     first = p["Dense_0"]
     own, shared = first["kernel"][:width], first["kernel"][width:]
     context = jnp.concatenate([biggest, mean], axis=-1) @ shared + first["bias"]  # (B, width)
@@ -229,11 +230,13 @@ def predict_points(
             radius.astype(np.float32), np.full(len(here), np.nan, np.float32),
             np.full(len(here), p.n_paths, np.float32),
         )  # fmt: skip
+        pending = []  # dispatched chunks: numpy prepares the next while XLA runs this one
         for first in range(0, len(here), size):
             part = Query(*(a[first : first + size] for a in q))
             n = len(part.radius)
             # a short chunk pads to a power of two, not to `size`: few shapes, little waste
             padded = min(size, max(MIN_CHUNK, 1 << (n - 1).bit_length()))
-            result = np.asarray(predict(params, table, pad_rows(part, padded)))[:n]
-            out[rows.start + first : rows.start + first + n] = result
+            pending.append((rows.start + first, n, predict(params, table, pad_rows(part, padded))))
+        for start, n, result in pending:
+            out[start : start + n] = np.asarray(result)[:n]
     return out
