@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from dpm.density.gather import PhotonIndex, photon_index, take
+from dpm.density.gather import NORMAL_COS, PhotonIndex, photon_index, take
 from dpm.nn.features import MIN_RADIUS, canonical_angle, features, kernel_estimate
 from dpm.nn.model import SHIFT, KernelNet
 from dpm.stopwatch import Stopwatch
@@ -113,13 +113,13 @@ class PhotonTable(NamedTuple):
     position: jnp.ndarray  # (P, 3)
     direction: jnp.ndarray  # (P, 3) unit, towards the photon's source
     flux: jnp.ndarray  # (P, 3)
+    normal: jnp.ndarray  # (P, 3) unit geometric normal on the side the photon arrived
 
 
 class Query(NamedTuple):
     """B visible points and the indices of their K nearest photons (a JAX pytree)."""
 
     index: np.ndarray  # (B, K) int32 photon rows; P (the table's length) for a missing one
-    valid: np.ndarray  # (B, K) bool: a photon whose normal agrees with the point's
     position_hi: np.ndarray  # (B, 3) float32 point position rounded to float32
     position_lo: np.ndarray  # (B, 3) float32 what the rounding left out (float64 − hi)
     normal: np.ndarray  # (B, 3) float32 unit normal
@@ -142,8 +142,10 @@ def gathered_batch(table: PhotonTable, q: Query) -> Batch:
         return jnp.take(values, q.index, axis=0, mode="fill", fill_value=0.0)
 
     offset = (take(table.position) - q.position_hi[:, None]) - q.position_lo[:, None]
+    # as `PhotonIndex.nearest` checks them; a missing photon's zero normal never agrees
+    valid = jnp.sum(take(table.normal) * q.normal[:, None], axis=-1) >= NORMAL_COS
     return Batch(
-        jnp.where(missing, 0.0, offset), take(table.direction), take(table.flux), q.valid,
+        jnp.where(missing, 0.0, offset), take(table.direction), take(table.flux), valid,
         q.normal, q.albedo, q.radius, q.angle, q.n_paths,
     )  # fmt: skip
 
@@ -151,12 +153,15 @@ def gathered_batch(table: PhotonTable, q: Query) -> Batch:
 def make_query_predict(
     model: nn.Module,
 ) -> Callable[[dict, PhotonTable, Query], jnp.ndarray]:
-    """A jitted pure function (params, PhotonTable, Query of B points) -> (B, 3) radiance."""
+    """A jitted pure function (params, PhotonTable, Query of (S, B) points) -> (S, B, 3)
+    radiance: S steps of B points each, run one after another inside the function (one call
+    per block of points, each step's activations sized to stay in the caches)."""
     radiance = batch_radiance(model)
-    return jax.jit(
-        lambda params, table, q: radiance(params, gathered_batch(table, q)),
-        compiler_options=FAST_DOTS,
-    )
+
+    def steps(params: dict, table: PhotonTable, q: Query) -> jnp.ndarray:
+        return jax.lax.map(lambda part: radiance(params, gathered_batch(table, part)), q)
+
+    return jax.jit(steps, compiler_options=FAST_DOTS)
 
 
 def neighbourhoods(
@@ -188,18 +193,27 @@ def neighbourhoods(
         )  # fmt: skip
 
 
-MIN_CHUNK = 16  # smallest padded chunk: points
+MIN_CHUNK = 16  # fewest points of a step
 
 
 def chunk_size(k: int) -> int:
-    """Points per inference chunk for K neighbours."""
-    return max(1, ACTIVATIONS_PER_CHUNK // k)
+    """Points per inference step for K neighbours: a power of two (so point blocks, also
+    powers of two, split into whole steps) with about ACTIVATIONS_PER_CHUNK photons."""
+    return 1 << max(0, (ACTIVATIONS_PER_CHUNK // k).bit_length() - 1)
 
 
-def pad_rows(q: Query, size: int) -> Query:
-    """q with its leading axis zero-padded to `size` rows (so every chunk has one shape)."""
-    extra = size - len(q.radius)
-    return Query(*(np.concatenate([a, np.zeros((extra, *a.shape[1:]), a.dtype)]) for a in q))
+def as_steps(q: Query, size: int) -> Query:
+    """q's points zero-padded and split into (S, B) steps of B = `size` points (one step of
+    fewer when q is short): S and B powers of two, so few shapes are compiled."""
+    n = len(q.radius)
+    size = min(size, max(MIN_CHUNK, 1 << (n - 1).bit_length()))
+    steps = 1 << (-(-n // size) - 1).bit_length()
+    padding = ((0, steps * size - n),)
+
+    def split(a: np.ndarray) -> np.ndarray:
+        return np.pad(a, padding + ((0, 0),) * (a.ndim - 1)).reshape(steps, size, *a.shape[1:])
+
+    return Query(*(split(a) for a in q))
 
 
 def predict_points(
@@ -214,29 +228,27 @@ def predict_points(
 ) -> np.ndarray:
     """(N, 3) float32 radiance at points (N, 3) from their k nearest photons, chunk by chunk,
     with `predict` from `make_query_predict`; gathering counts as the watch's "gather" (the
-    caller times the rest)."""
+    caller times the rest). Each block's network runs while the next block is gathered, so
+    the "gather" stage also holds the network's time that the gather could not hide."""
     index = photon_index(photons, watch)
     p = index.photons
-    table = PhotonTable(*(jnp.asarray(a, jnp.float32) for a in (p.position, p.direction, p.flux)))
+    arrays = (p.position, p.direction, p.flux, p.normal)
+    table = PhotonTable(*(jnp.asarray(a, jnp.float32) for a in arrays))
     out = np.zeros((len(position), 3), np.float32)
     size = chunk_size(k)
-    for rows, nb in index.nearest(position, normal, k, watch):
+    pending = []
+    for rows, nb in index.nearest(position, normal, k, watch, agree=False):
         here = np.asarray(position[rows], np.float64)
         hi = here.astype(np.float32)
         radius = np.where(np.isfinite(nb.distance[:, -1]), nb.distance[:, -1], 0.0)
         q = Query(
-            nb.index.astype(np.int32), nb.valid, hi, (here - hi).astype(np.float32),
+            nb.index.astype(np.int32), hi, (here - hi).astype(np.float32),
             np.asarray(normal[rows], np.float32), np.asarray(albedo[rows], np.float32),
             radius.astype(np.float32), np.full(len(here), np.nan, np.float32),
             np.full(len(here), p.n_paths, np.float32),
         )  # fmt: skip
-        pending = []  # dispatched chunks: numpy prepares the next while XLA runs this one
-        for first in range(0, len(here), size):
-            part = Query(*(a[first : first + size] for a in q))
-            n = len(part.radius)
-            # a short chunk pads to a power of two, not to `size`: few shapes, little waste
-            padded = min(size, max(MIN_CHUNK, 1 << (n - 1).bit_length()))
-            pending.append((rows.start + first, n, predict(params, table, pad_rows(part, padded))))
-        for start, n, result in pending:
-            out[start : start + n] = np.asarray(result)[:n]
+        result = predict(params, table, as_steps(q, size))  # runs while the next block gathers
+        pending.append((rows, result))
+    for rows, result in pending:
+        out[rows] = np.asarray(result).reshape(-1, 3)[: rows.stop - rows.start]
     return out
