@@ -33,7 +33,7 @@ import numpy as np
 from common import RESULTS, SCENES, M, markdown_table
 from dpm import load_scene
 from dpm.density.gather import PhotonIndex
-from dpm.nn.infer import FAST_DOTS, make_query_predict, predict_points
+from dpm.nn.infer import fast_dots, make_query_predict, predict_points
 from dpm.nn.weights import load_weights, shipped_weights
 from dpm.tracer import build_bvh, trace_photons, trace_visible_points
 
@@ -62,7 +62,7 @@ def flops_per_point(params: dict, k: int) -> tuple[int, int]:
 def peak_gflops(sizes: tuple[int, ...], rounds: int) -> float:
     """The best fp32 n×n matmul GFLOP/s of JAX here, with XLA's dots and with YNNPACK's."""
     best = 0.0
-    for options in ({}, FAST_DOTS):
+    for options in ({}, fast_dots()):
         for n in sizes:
             a = jnp.asarray(np.random.default_rng(0).random((n, n)), jnp.float32)
             mm = jax.jit(lambda a: a @ a, compiler_options=options)

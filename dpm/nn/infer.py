@@ -13,6 +13,7 @@ with XLA's YNNPACK matmuls; it equals the per-point Flax `apply` within float ro
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
+from functools import cache
 from typing import NamedTuple
 
 import flax.linen as nn
@@ -28,7 +29,17 @@ from dpm.tracer import PhotonMap
 
 ACTIVATIONS_PER_CHUNK = 1 << 14  # points per chunk × K: activations stay in the caches
 # XLA's YNNPACK matmuls: 1.5–2× XLA's default on the network's thin (rows × 32) layers
-FAST_DOTS = {"xla_cpu_experimental_ynn_fusion_type": "LIBRARY_FUSION_TYPE_DOT"}
+YNN_DOTS = {"xla_cpu_experimental_ynn_fusion_type": "LIBRARY_FUSION_TYPE_DOT"}
+
+
+@cache
+def fast_dots() -> dict:
+    """YNN_DOTS where this jaxlib knows the option (it is experimental), else no options."""
+    try:
+        jax.jit(lambda a: a @ a, compiler_options=YNN_DOTS)(jnp.ones((2, 2)))
+    except Exception:  # an unknown option or value: XLA's own dots
+        return {}
+    return YNN_DOTS
 
 
 class Batch(NamedTuple):
@@ -104,7 +115,7 @@ def batch_radiance(model: nn.Module) -> Callable[[dict, Batch], jnp.ndarray]:
 
 def make_predict(model: nn.Module) -> Callable[[dict, Batch], jnp.ndarray]:
     """A jitted pure function (params, Batch of B points) -> (B, 3) float32 radiance."""
-    return jax.jit(batch_radiance(model), compiler_options=FAST_DOTS)
+    return jax.jit(batch_radiance(model), compiler_options=fast_dots())
 
 
 class PhotonTable(NamedTuple):
@@ -161,7 +172,7 @@ def make_query_predict(
     def steps(params: dict, table: PhotonTable, q: Query) -> jnp.ndarray:
         return jax.lax.map(lambda part: radiance(params, gathered_batch(table, part)), q)
 
-    return jax.jit(steps, compiler_options=FAST_DOTS)
+    return jax.jit(steps, compiler_options=fast_dots())
 
 
 def neighbourhoods(
