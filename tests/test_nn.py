@@ -21,7 +21,14 @@ from dpm.density import PM
 from dpm.errors import InputError
 from dpm.nn.config import Config, ModelConfig, TrainConfig, load_config
 from dpm.nn.features import flux_map, flux_unmap
-from dpm.nn.infer import Batch, make_predict, neighbourhoods, point_radiance, predict_points
+from dpm.nn.infer import (
+    Batch,
+    make_predict,
+    make_query_predict,
+    neighbourhoods,
+    point_radiance,
+    predict_points,
+)
 from dpm.nn.losses import loss_value, mu_law
 from dpm.nn.model import make_model
 from dpm.nn.sampler import Sampler
@@ -164,12 +171,37 @@ def test_jit_vmap_inference_equals_a_plain_per_point_implementation(monkeypatch)
     model = make_model("dpm", 8)
     params = random_params(model, 5)
     monkeypatch.setattr("dpm.nn.infer.ACTIVATIONS_PER_CHUNK", 64 * K)  # several chunks
-    out = predict_points(make_predict(model), params, photons, position, normal, albedo, K)
+    out = predict_points(make_query_predict(model), params, photons, position, normal, albedo, K)
     b = next(neighbourhoods(photons, position, normal, albedo, K))[1]
     plain = np.array([plain_radiance(params, b, i) if b.valid[i].any() else np.zeros(3)
                       for i in range(n)])  # fmt: skip
     assert np.all(out[::7] == 0)
     np.testing.assert_allclose(out, plain, rtol=2e-4, atol=1e-7)
+
+
+@pytest.mark.parametrize("n_photons", [3000, K])
+def test_fast_inference_equals_the_flax_module_point_by_point(n_photons: int) -> None:
+    """`make_query_predict` (photons gathered inside the jit, flat matmuls, YNNPACK dots)
+    equals the Flax module applied point by point to numpy-gathered Batches, far from the
+    origin (the offsets keep their float64 accuracy), and with exactly K photons."""
+    shift = np.float32([1000.0, 0.0, -2000.0])
+    photons = plane_photons(n_photons, 7)
+    photons = replace(photons, position=photons.position + shift)
+    rng = np.random.default_rng(8)
+    n = 150
+    position = (np.c_[rng.random(n), np.zeros(n), rng.random(n)] + shift).astype(np.float64)
+    normal = np.tile(np.float32([0, 1, 0]), (n, 1))
+    normal[::9] = np.float32([0, -1, 0])  # no valid photon
+    albedo = rng.uniform(0.2, 0.9, (n, 3)).astype(np.float32)
+    model = make_model("dpm", 8)
+    params = random_params(model, 9)
+    fast = predict_points(make_query_predict(model), params, photons, position, normal, albedo, K)
+    b = next(neighbourhoods(photons, position, normal, albedo, K))[1]
+    slow = jax.jit(jax.vmap(lambda p, one: point_radiance(model, p, one), (None, 0)))
+    plain = np.asarray(slow(params, b))
+    assert np.all(fast[::9] == 0) and np.all(plain[::9] == 0)
+    assert np.abs(plain).max() > 0
+    np.testing.assert_allclose(fast, plain, rtol=1e-4, atol=1e-6 * np.abs(plain).max())
 
 
 def test_a_fresh_network_is_the_uniform_kernel() -> None:
@@ -184,7 +216,7 @@ def test_a_fresh_network_is_the_uniform_kernel() -> None:
         np.arange(n, dtype=np.int32), np.arange(n),
     )  # fmt: skip
     model = make_model("dpm", 8)
-    out = predict_points(make_predict(model), init_params(model, K, 0), photons,
+    out = predict_points(make_query_predict(model), init_params(model, K, 0), photons,
                          points.position, points.normal, points.albedo, K)  # fmt: skip
     np.testing.assert_allclose(out, PM(k=K).estimate(points, photons), rtol=1e-5)
 

@@ -33,7 +33,7 @@ class Neighbourhoods:
 
     index: np.ndarray  # (n, K) int64 photon index (len(photons) pads when there are fewer)
     distance: np.ndarray  # (n, K) float64 distance in scene units (inf pads)
-    valid: np.ndarray  # (n, K) bool: a photon whose normal agrees with the point's
+    valid: np.ndarray | None  # (n, K) bool: a photon whose normal agrees with the point's
 
 
 @dataclass(frozen=True)
@@ -73,10 +73,16 @@ class PhotonIndex:
         return len(self.photons)
 
     def nearest(
-        self, position: np.ndarray, normal: np.ndarray, k: int, watch: Stopwatch | None = None
+        self,
+        position: np.ndarray,
+        normal: np.ndarray,
+        k: int,
+        watch: Stopwatch | None = None,
+        agree: bool = True,
     ) -> Iterator[tuple[slice, Neighbourhoods]]:
         """The k nearest photons of points (N, 3) with unit normals (N, 3), a chunk of points
-        at a time (the map must hold photons); query time counts as the watch's "gather"."""
+        at a time (the map must hold photons); query time counts as the watch's "gather".
+        agree False leaves `valid` None, for callers that check the normals themselves."""
         watch = watch or Stopwatch()
         for first in range(0, len(position), POINTS_PER_CHUNK):
             with watch(GATHER):
@@ -84,7 +90,11 @@ class PhotonIndex:
                 dist, index = self.tree.query(position[rows].astype(np.float64), k=k, workers=-1)
                 dist, index = dist.reshape(-1, k), index.reshape(-1, k)  # k = 1 drops the axis
                 # a missing neighbour's zero normal never agrees
-                valid = _agree(take(self.photons.normal, index), normal[rows, None, :])
+                valid = (
+                    _agree(take(self.photons.normal, index), normal[rows, None, :])
+                    if agree
+                    else None
+                )
             yield rows, Neighbourhoods(index, dist, valid)
 
 

@@ -12,7 +12,7 @@ import numpy as np
 from dpm.density.gather import Photons, Watch
 from dpm.density.pm import k_nearest_start
 from dpm.errors import InputError
-from dpm.nn.infer import make_predict, predict_points
+from dpm.nn.infer import make_query_predict, predict_points
 from dpm.nn.weights import Weights, load_weights, shipped_weights
 from dpm.tracer import VisiblePoints
 
@@ -23,7 +23,7 @@ DEFAULT_K = 50  # the shipped model used when neither k nor a weight file is giv
 def _load(path: Path, stamp: tuple[int, int]) -> tuple[Weights, object]:
     """Weights and their jitted predictor, once per file version (stamp: mtime, size)."""
     weights = load_weights(path)
-    return weights, make_predict(weights.model())
+    return weights, make_query_predict(weights.model())
 
 
 def _load_file(path: Path) -> tuple[Weights, object]:

@@ -1,14 +1,19 @@
 """Inference: the DPM estimate as a pure function of (params, inputs) under `jit` and `vmap`.
 
 `neighbourhoods` gathers the K nearest photons of visible points (numpy, cKDTree) into
-`Batch`es; `make_predict(model)` returns a jitted function (params, Batch) -> (B, 3) radiance,
-vmapped over points; `predict_points` runs it over a whole set of points in fixed-size chunks
-(one compilation per K, bounded memory).
+`Batch`es (training reads these); `make_predict(model)` returns a jitted function
+(params, Batch) -> (B, 3) radiance. Rendering uses `make_query_predict`, which takes the
+photon map's arrays once and each chunk of points as indices of their neighbours (`Query`),
+so gathering the (B, K, 3) photon arrays happens inside the jitted function;
+`predict_points` runs it over a whole set of points in chunks sized to stay in the caches.
+The KernelNet is evaluated as flat matmuls over all the chunk's photons (`kernel_radiance`),
+with XLA's YNNPACK matmuls; it equals the per-point Flax `apply` within float rounding.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
+from functools import cache
 from typing import NamedTuple
 
 import flax.linen as nn
@@ -16,13 +21,25 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from dpm.density.gather import PhotonIndex, photon_index, take
+from dpm.density.gather import NORMAL_COS, PhotonIndex, photon_index, take
 from dpm.nn.features import MIN_RADIUS, canonical_angle, features, kernel_estimate
-from dpm.nn.model import KernelNet
+from dpm.nn.model import SHIFT, KernelNet
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap
 
-ACTIVATIONS_PER_CHUNK = 1 << 19  # points per chunk × K: bounds the activations' memory
+ACTIVATIONS_PER_CHUNK = 1 << 14  # points per chunk × K: activations stay in the caches
+# XLA's YNNPACK matmuls: 1.5–2× XLA's default on the network's thin (rows × 32) layers
+YNN_DOTS = {"xla_cpu_experimental_ynn_fusion_type": "LIBRARY_FUSION_TYPE_DOT"}
+
+
+@cache
+def fast_dots() -> dict:
+    """YNN_DOTS where this jaxlib knows the option (it is experimental), else no options."""
+    try:
+        jax.jit(lambda a: a @ a, compiler_options=YNN_DOTS)(jnp.ones((2, 2)))
+    except Exception:  # an unknown option or value: XLA's own dots
+        return {}
+    return YNN_DOTS
 
 
 class Batch(NamedTuple):
@@ -52,9 +69,110 @@ def point_radiance(model: nn.Module, params: dict, b: Batch) -> jnp.ndarray:
     return b.albedo / jnp.pi * flux / (jnp.pi * jnp.maximum(b.radius, MIN_RADIUS) ** 2)
 
 
+def _dense(layer: dict, x: jnp.ndarray) -> jnp.ndarray:
+    """(R, out) x @ kernel + bias of one Flax Dense layer's params on rows (R, in)."""
+    return x @ layer["kernel"] + layer["bias"]
+
+
+def kernel_radiance(params: dict, b: Batch) -> jnp.ndarray:
+    """(B, 3) radiance of B points by KernelNet's params: `point_radiance` rewritten as flat
+    matmuls over the B·K photon rows, for speed (equal within float rounding, tested).
+
+    The predictor's first layer takes [photon feature, context]; its context half is applied
+    once per point, not once per photon, which saves a third of the network's arithmetic.
+    """
+    p = params["params"]
+    n, k = b.valid.shape
+    canonical = jax.vmap(canonical_angle)(b.offset, b.valid, b.normal)
+    angle = jnp.where(jnp.isnan(b.angle), canonical, b.angle)
+    x = jax.vmap(features)(b.offset, b.direction, b.flux, b.normal, b.radius, b.n_paths, angle)
+    h = x.reshape(n * k, x.shape[-1])
+    for name in ("Dense_0", "Dense_1", "Dense_2"):
+        h = jax.nn.relu(_dense(p["Extractor_0"][name], h))
+    width = h.shape[-1]
+    h3 = h.reshape(n, k, width)
+    # ReLU features are ≥ 0, so zeroing the invalid photons leaves the max over the valid
+    # ones (and 0 when none is valid, as the Extractor does), with one masked array
+    masked = h3 * b.valid[:, :, None]
+    biggest = jnp.max(masked, axis=1)
+    mean = jnp.sum(masked, axis=1) / jnp.maximum(b.valid.sum(1), 1)[:, None]
+    first = p["Dense_0"]
+    own, shared = first["kernel"][:width], first["kernel"][width:]
+    context = jnp.concatenate([biggest, mean], axis=-1) @ shared + first["bias"]  # (B, width)
+    z = jax.nn.relu((h @ own).reshape(n, k, width) + context[:, None, :])
+    z = jax.nn.relu(_dense(p["Dense_1"], z.reshape(n * k, width)))
+    z = _dense(p["Dense_2"], z).reshape(n, k)
+    weight = jnp.where(b.valid, jax.nn.softplus(z + SHIFT), 0.0)
+    return jax.vmap(kernel_estimate)(weight, b.flux, b.valid, b.albedo, b.radius)
+
+
+def batch_radiance(model: nn.Module) -> Callable[[dict, Batch], jnp.ndarray]:
+    """The pure function (params, Batch of B points) -> (B, 3) radiance of `model`."""
+    if isinstance(model, KernelNet):
+        return kernel_radiance
+    return jax.vmap(lambda params, b: point_radiance(model, params, b), (None, 0))
+
+
 def make_predict(model: nn.Module) -> Callable[[dict, Batch], jnp.ndarray]:
     """A jitted pure function (params, Batch of B points) -> (B, 3) float32 radiance."""
-    return jax.jit(jax.vmap(lambda params, b: point_radiance(model, params, b), (None, 0)))
+    return jax.jit(batch_radiance(model), compiler_options=fast_dots())
+
+
+class PhotonTable(NamedTuple):
+    """A photon map's arrays as the network reads them (float32, scene units and W ÷ N)."""
+
+    position: jnp.ndarray  # (P, 3)
+    direction: jnp.ndarray  # (P, 3) unit, towards the photon's source
+    flux: jnp.ndarray  # (P, 3)
+    normal: jnp.ndarray  # (P, 3) unit geometric normal on the side the photon arrived
+
+
+class Query(NamedTuple):
+    """B visible points and the indices of their K nearest photons (a JAX pytree)."""
+
+    index: np.ndarray  # (B, K) int32 photon rows; P (the table's length) for a missing one
+    position_hi: np.ndarray  # (B, 3) float32 point position rounded to float32
+    position_lo: np.ndarray  # (B, 3) float32 what the rounding left out (float64 − hi)
+    normal: np.ndarray  # (B, 3) float32 unit normal
+    albedo: np.ndarray  # (B, 3) float32 Lambertian albedo
+    radius: np.ndarray  # (B,) float32 distance to the K-th photon
+    angle: np.ndarray  # (B,) float32 frame rotation (NaN: canonical), as in `Batch`
+    n_paths: np.ndarray  # (B,) float32 emitted photon paths N
+
+
+def gathered_batch(table: PhotonTable, q: Query) -> Batch:
+    """The Batch of q's points with their photons read from the table inside the jitted
+    function, so the (B, K, 3) arrays never pass through numpy.
+
+    Offsets are (photon − hi) − lo in float32: the first difference is exact for nearby
+    points (Sterbenz), so the offset keeps the float64 point position's accuracy.
+    """
+    missing = (q.index >= table.position.shape[0])[:, :, None]
+
+    def take(values: jnp.ndarray) -> jnp.ndarray:
+        return jnp.take(values, q.index, axis=0, mode="fill", fill_value=0.0)
+
+    offset = (take(table.position) - q.position_hi[:, None]) - q.position_lo[:, None]
+    # as `PhotonIndex.nearest` checks them; a missing photon's zero normal never agrees
+    valid = jnp.sum(take(table.normal) * q.normal[:, None], axis=-1) >= NORMAL_COS
+    return Batch(
+        jnp.where(missing, 0.0, offset), take(table.direction), take(table.flux), valid,
+        q.normal, q.albedo, q.radius, q.angle, q.n_paths,
+    )  # fmt: skip
+
+
+def make_query_predict(
+    model: nn.Module,
+) -> Callable[[dict, PhotonTable, Query], jnp.ndarray]:
+    """A jitted pure function (params, PhotonTable, Query of (S, B) points) -> (S, B, 3)
+    radiance: S steps of B points each, run one after another inside the function (one call
+    per block of points, each step's activations sized to stay in the caches)."""
+    radiance = batch_radiance(model)
+
+    def steps(params: dict, table: PhotonTable, q: Query) -> jnp.ndarray:
+        return jax.lax.map(lambda part: radiance(params, gathered_batch(table, part)), q)
+
+    return jax.jit(steps, compiler_options=fast_dots())
 
 
 def neighbourhoods(
@@ -86,22 +204,31 @@ def neighbourhoods(
         )  # fmt: skip
 
 
-MIN_CHUNK = 256  # smallest padded chunk: points
+MIN_CHUNK = 16  # fewest points of a step
 
 
 def chunk_size(k: int) -> int:
-    """Points per inference chunk for K neighbours."""
-    return max(1, ACTIVATIONS_PER_CHUNK // k)
+    """Points per inference step for K neighbours: a power of two (so point blocks, also
+    powers of two, split into whole steps) with about ACTIVATIONS_PER_CHUNK photons."""
+    return 1 << max(0, (ACTIVATIONS_PER_CHUNK // k).bit_length() - 1)
 
 
-def pad_batch(b: Batch, size: int) -> Batch:
-    """b with its leading axis zero-padded to `size` rows (so every chunk has one shape)."""
-    extra = size - len(b.radius)
-    return Batch(*(np.concatenate([a, np.zeros((extra, *a.shape[1:]), a.dtype)]) for a in b))
+def as_steps(q: Query, size: int) -> Query:
+    """q's points zero-padded and split into (S, B) steps of B = `size` points (one step of
+    fewer when q is short): S and B powers of two, so few shapes are compiled."""
+    n = len(q.radius)
+    size = min(size, max(MIN_CHUNK, 1 << (n - 1).bit_length()))
+    steps = 1 << (-(-n // size) - 1).bit_length()
+    padding = ((0, steps * size - n),)
+
+    def split(a: np.ndarray) -> np.ndarray:
+        return np.pad(a, padding + ((0, 0),) * (a.ndim - 1)).reshape(steps, size, *a.shape[1:])
+
+    return Query(*(split(a) for a in q))
 
 
 def predict_points(
-    predict: Callable[[dict, Batch], jnp.ndarray],
+    predict: Callable[[dict, PhotonTable, Query], jnp.ndarray],
     params: dict,
     photons: PhotonMap | PhotonIndex,
     position: np.ndarray,
@@ -110,16 +237,29 @@ def predict_points(
     k: int,
     watch: Stopwatch | None = None,
 ) -> np.ndarray:
-    """(N, 3) float32 radiance at points (N, 3) from their k nearest photons, chunk by chunk;
-    gathering counts as the watch's "gather" (the caller times the rest)."""
+    """(N, 3) float32 radiance at points (N, 3) from their k nearest photons, chunk by chunk,
+    with `predict` from `make_query_predict`; gathering counts as the watch's "gather" (the
+    caller times the rest). Each block's network runs while the next block is gathered, so
+    the "gather" stage also holds the network's time that the gather could not hide."""
+    index = photon_index(photons, watch)
+    p = index.photons
+    arrays = (p.position, p.direction, p.flux, p.normal)
+    table = PhotonTable(*(jnp.asarray(a, jnp.float32) for a in arrays))
     out = np.zeros((len(position), 3), np.float32)
     size = chunk_size(k)
-    for rows, b in neighbourhoods(photons, position, normal, albedo, k, watch=watch):
-        for first in range(0, len(b.radius), size):
-            part = Batch(*(a[first : first + size] for a in b))
-            n = len(part.radius)
-            # a short chunk pads to a power of two, not to `size`: few shapes, little waste
-            padded = min(size, max(MIN_CHUNK, 1 << (n - 1).bit_length()))
-            result = np.asarray(predict(params, pad_batch(part, padded)))[:n]
-            out[rows.start + first : rows.start + first + n] = result
+    pending = []
+    for rows, nb in index.nearest(position, normal, k, watch, agree=False):
+        here = np.asarray(position[rows], np.float64)
+        hi = here.astype(np.float32)
+        radius = np.where(np.isfinite(nb.distance[:, -1]), nb.distance[:, -1], 0.0)
+        q = Query(
+            nb.index.astype(np.int32), hi, (here - hi).astype(np.float32),
+            np.asarray(normal[rows], np.float32), np.asarray(albedo[rows], np.float32),
+            radius.astype(np.float32), np.full(len(here), np.nan, np.float32),
+            np.full(len(here), p.n_paths, np.float32),
+        )  # fmt: skip
+        result = predict(params, table, as_steps(q, size))  # runs while the next block gathers
+        pending.append((rows, result))
+    for rows, result in pending:
+        out[rows] = np.asarray(result).reshape(-1, 3)[: rows.stop - rows.start]
     return out

@@ -1,0 +1,174 @@
+"""The network's speed against this machine's matmul peak, and the K-nearest gather beside it.
+
+    python benchmarks/inference.py [--quick] [--scene NAME]
+
+For DPM-50 and DPM-500 (the shipped weights) at 65,536 and 262,144 visible points of an
+example scene (default the ring; its caustic photons of M emitted paths, seed 0):
+- FLOPs per point counted from the architecture: two per multiply-add of every dense layer,
+  as executed (the predictor's context half once per point) and as the Flax module is written
+  (that half once per photon); activations, pooling and features are not counted;
+- seconds of the gather (the cKDTree's K-nearest queries alone) and of the network stage:
+  what `predict_points` takes beyond the gather (building the steps, reading the photons and
+  checking their normals inside the jit, features, the network, Eq. 2; it runs while the
+  next block of points is gathered), each the best of a few runs after compilation;
+- achieved GFLOP/s (executed FLOPs over the network's seconds) and its fraction of the peak:
+  the best fp32 matmul rate JAX reaches here in the same run (n×n by n×n, XLA's own dots and
+  the YNNPACK dots the network uses).
+Prints `fraction of peak: X` (the worst of the four) and writes
+benchmarks/results/inference.md; `--quick` (CI) runs 4,096 points once and writes nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import platform
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from common import RESULTS, SCENES, M, markdown_table
+from dpm import load_scene
+from dpm.density.gather import PhotonIndex
+from dpm.nn.infer import fast_dots, make_query_predict, predict_points
+from dpm.nn.weights import load_weights, shipped_weights
+from dpm.tracer import build_bvh, trace_photons, trace_visible_points
+
+KS = (50, 500)
+POINTS = (65_536, 262_144)
+
+
+def dense_layers(params: dict) -> list[tuple[str, int, int]]:
+    """(name, inputs, outputs) of every dense layer of KernelNet's params, in order."""
+    p = params["params"]
+    layers = [(f"Extractor_0/{n}", p["Extractor_0"][n]) for n in ("Dense_0", "Dense_1", "Dense_2")]
+    layers += [(n, p[n]) for n in ("Dense_0", "Dense_1", "Dense_2")]
+    return [(name, *layer["kernel"].shape) for name, layer in layers]
+
+
+def flops_per_point(params: dict, k: int) -> tuple[int, int]:
+    """(executed, as written) FLOPs of one point's K photons: 2 per multiply-add."""
+    layers = dense_layers(params)
+    width = layers[2][2]  # the extractor's output: the predictor's per-photon input half
+    written = 2 * k * sum(i * o for _, i, o in layers)
+    name, i, o = layers[3]  # the predictor's first layer: [photon feature, context]
+    context = 2 * (i - width) * o
+    return written - k * context + context, written
+
+
+def peak_gflops(sizes: tuple[int, ...], rounds: int) -> float:
+    """The best fp32 n×n matmul GFLOP/s of JAX here, with XLA's dots and with YNNPACK's."""
+    best = 0.0
+    for options in ({}, fast_dots()):
+        for n in sizes:
+            a = jnp.asarray(np.random.default_rng(0).random((n, n)), jnp.float32)
+            mm = jax.jit(lambda a: a @ a, compiler_options=options)
+            seconds = best_of(lambda mm=mm, a=a: jax.block_until_ready(mm(a)), rounds)
+            best = max(best, 2 * n**3 / seconds / 1e9)
+    return best
+
+
+def best_of(fn, rounds: int) -> float:
+    """Fewest wall seconds of fn over `rounds` runs after one warm-up."""
+    fn()
+    seconds = []
+    for _ in range(rounds):
+        start = time.perf_counter()
+        fn()
+        seconds.append(time.perf_counter() - start)
+    return min(seconds)
+
+
+def scene_points(name: str, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, PhotonIndex]:
+    """Positions, normals, albedos (n, 3) of n visible points of the scene (one per pixel of
+    a square image, hits only, repeated if short) and the index of M paths' caustic photons."""
+    scene = load_scene(SCENES / f"{name}.obj")
+    bvh = build_bvh(scene)
+    side = int(np.ceil(np.sqrt(n * 1.5)))
+    camera = scene.camera.with_resolution(side, side)
+    points = trace_visible_points(scene, bvh, camera, 1, 0, (0, side))
+    hit = np.resize(np.flatnonzero(points.hit), n)
+    photons = trace_photons(scene, bvh, M, seed=0, caustic_only=True)
+    return points.position[hit], points.normal[hit], points.albedo[hit], PhotonIndex(photons)
+
+
+def time_network(predict, params: dict, index: PhotonIndex, points: tuple, k: int, rounds: int):
+    """Fewest seconds of (network, gather) over `rounds` runs after one warm-up: gather is the
+    K-nearest queries alone, network what `predict_points` takes beyond them (it overlaps the
+    two); points: positions, normals, albedos (n, 3)."""
+    position, normal, _ = points
+
+    def gather() -> None:
+        for _ in index.nearest(position, normal, k, agree=False):
+            pass
+
+    total = best_of(lambda: predict_points(predict, params, index, *points, k), rounds)
+    alone = best_of(gather, rounds)
+    return total - alone, alone
+
+
+def measure(name: str, points: tuple[int, ...], rounds: int) -> list[dict]:
+    """One row per (K, points): FLOPs, network and gather seconds, GFLOP/s."""
+    rows = []
+    for n in points:
+        position, normal, albedo, index = scene_points(name, n)
+        for k in KS:
+            weights = load_weights(shipped_weights(k))
+            predict = make_query_predict(weights.model())
+            params = jax.tree.map(jnp.asarray, weights.params)
+            network, gather = time_network(
+                predict, params, index, (position, normal, albedo), k, rounds
+            )
+            executed, written = flops_per_point(weights.params, k)
+            rows.append({"k": k, "points": n, "executed": executed, "written": written,
+                         "network_s": network, "gather_s": gather,
+                         "gflops": n * executed / network / 1e9})  # fmt: skip
+    return rows
+
+
+def report(rows: list[dict], peak: float, name: str) -> list[str]:
+    """The markdown lines of the results."""
+    head = ["model", "points", "FLOPs/point executed", "as written", "network s", "gather s",
+            "GFLOP/s", "fraction of peak"]  # fmt: skip
+    body = [[f"DPM-{r['k']}", f"{r['points']:,}", f"{r['executed']:,}", f"{r['written']:,}",
+             f"{r['network_s']:.3f}", f"{r['gather_s']:.3f}", f"{r['gflops']:.1f}",
+             f"{r['gflops'] / peak:.2f}"] for r in rows]  # fmt: skip
+    return [
+        f"Scene: {name}, caustic photons of M = {M:,} emitted paths (seed 0). "
+        f"Peak: {peak:.0f} GFLOP/s (best fp32 matmul in JAX, same run).",
+        "",
+        *markdown_table(head, body),
+        "",
+        f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; "
+        f"JAX {jax.__version__}; {datetime.date.today().isoformat()}",
+    ]
+
+
+def main() -> None:
+    """Measure, print the table and `fraction of peak: X`, write inference.md (not --quick)."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="4,096 points, one run, no file")
+    parser.add_argument("--scene", default="ring", help="example scene (default: ring)")
+    args = parser.parse_args()
+    points, rounds, sizes = ((4096,), 1, (512,)) if args.quick else (POINTS, 3, (1024, 2048))
+    peak = peak_gflops(sizes, rounds + 2)
+    rows = measure(args.scene, points, rounds)
+    lines = report(rows, peak, args.scene)
+    print("\n".join(lines))
+    print(f"fraction of peak: {min(r['gflops'] for r in rows) / peak:.2f}")
+    if not args.quick:
+        text = [
+            "# Network inference against the matmul peak",
+            "",
+            "Made by `python benchmarks/inference.py` (see its docstring for what is counted).",
+            "",
+            *lines,
+        ]
+        (RESULTS / "inference.md").write_text("\n".join(text) + "\n")
+
+
+if __name__ == "__main__":
+    main()
