@@ -50,7 +50,12 @@ def _unoccluded(bvh, ax, ay, az, bx, by, bz, stack):
     return not any_hit(bvh, ax, ay, az, dx * inv, dy * inv, dz * inv, length, stack)
 
 
-@nb.njit(cache=True, error_model="numpy")
+# Compiled without Numba's reference counting (`_nrt=False`; it allocates nothing). With it,
+# every inlined call that takes the scene's or the BVH's tuple of arrays (next_surface, any_hit,
+# scatter_specular, ...) increments and decrements each array's reference count: some forty
+# atomic updates per ray on counters that both threads share, which cost a third of the
+# shading time on two cores. Functions it calls inherit the setting.
+@nb.njit(cache=True, _nrt=False, error_model="numpy")
 def shade_one(bvh, sc, seed, stream, eps, caustics, stack, px, py, pz, nx, ny, nz, ar, ag, ab):
     """RGB radiance reflected by the diffuse point p (normal n towards the viewer, albedo a)."""
     inv_pi = 1.0 / math.pi
