@@ -50,31 +50,32 @@ MITSUBA_CHECK_SPP = 4096
 CALIBRATION_SPP = 4
 
 
-def caustic_reference(scene: Scene, camera: Camera, name: str) -> tuple[np.ndarray, float]:
-    """(H, W, 3) caustic radiance the camera sees, per pixel, and the PPM halves' noise."""
+def caustic_reference(scene: Scene, camera: Camera, folder: Path) -> tuple[np.ndarray, float]:
+    """(H, W, 3) caustic radiance the camera sees, per pixel, and the PPM halves' noise (the
+    halves' checkpoints in `folder`)."""
     bvh = build_bvh(scene)
     points = trace_visible_points(scene, bvh, camera, REF_CAUSTIC_SPP, 1001, (0, camera.height))
     lo, hi = scene.bounds
     radius = 5e-4 * float(np.linalg.norm(np.subtract(hi, lo, dtype=np.float64)))
     ref = ppm_reference(
         scene, bvh, points, REF_CAUSTIC_PATHS, radius, 1_000_000, seed=7,
-        checkpoint_dir=OUT / f"{name}-caustic", progress=True,
+        checkpoint_dir=folder, progress=True,
     )  # fmt: skip
     seen = points.throughput * ref.radiance
     image = seen.reshape(camera.height, camera.width, REF_CAUSTIC_SPP, 3).mean(axis=2)
     return image.astype(np.float32), ref.noise
 
 
-def reference(scene: Scene, camera: Camera, name: str) -> np.ndarray:
-    """The long reference image (H, W, 3), cached as an EXR."""
-    path = OUT / f"{name}-reference.exr"
+def reference(scene: Scene, camera: Camera, name: str, path: Path | None = None) -> np.ndarray:
+    """The long reference image (H, W, 3), cached as an EXR at `path` (default: OUT)."""
+    path = path or OUT / f"{name}-reference.exr"
     if path.exists():
         return read_exr(path)
     size = {"width": camera.width, "height": camera.height}
     nocaustic = render(
         scene, RenderOptions(method="pt-nocaustic", spp=REF_SPP, seed=1000, **size)
     ).image
-    caustic, noise = caustic_reference(scene, camera, name)
+    caustic, noise = caustic_reference(scene, camera, path.with_name(f"{path.stem}-caustic"))
     print(name, f"caustic reference noise {noise:.5f}", flush=True)
     image = nocaustic + caustic
     write_image(path, image)

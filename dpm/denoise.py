@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from dpm.errors import InputError
+from dpm.tracer.visible import VisiblePoints
 
 
 def denoise(color: np.ndarray, albedo: np.ndarray, normal: np.ndarray) -> np.ndarray:
@@ -27,3 +28,17 @@ def denoise(color: np.ndarray, albedo: np.ndarray, normal: np.ndarray) -> np.nda
     images = [np.ascontiguousarray(np.nan_to_num(a), np.float32) for a in (color, albedo, normal)]
     images[0] = np.maximum(images[0], 0.0)  # HDR input must be non-negative
     return pyoidn.denoise(*images, hdr=True, quality="high")
+
+
+def guides(points: VisiblePoints) -> tuple[np.ndarray, np.ndarray]:
+    """The denoiser's per-sample guides: (N, 3) albedo in [0, 1] and (N, 3) unit normal.
+
+    Albedo is the first diffuse surface's reflectance tinted by the mirrors and glass on the
+    way (OIDN's convention for delta surfaces); a light seen directly gets its normalised
+    colour, and a miss zero albedo and normal.
+    """
+    albedo = np.clip(points.albedo * points.throughput, 0.0, 1.0)
+    peak = points.emitted.max(axis=1, keepdims=True)
+    light = ~points.hit & (peak[:, 0] > 0)
+    albedo[light] = points.emitted[light] / peak[light]
+    return albedo, points.normal

@@ -36,9 +36,25 @@ def atomic(path: Path) -> Iterator[Path]:
             os.unlink(tmp)
 
 
+KNEE = 0.8  # linear values above this roll off towards 1 instead of clipping
+
+
+def tone_map(image: np.ndarray) -> np.ndarray:
+    """(H, W, 3) linear RGB into [0, 1): identity up to KNEE, then the shoulder
+    KNEE + (1 - KNEE) t / (1 + t), t = (m - KNEE) / (1 - KNEE), on each pixel's largest
+    channel m, the three channels scaled alike (hue kept). It is slow enough that caustics up
+    to about 20 (in linear units) still get distinct 8-bit levels instead of clipping to white."""
+    x = np.maximum(np.nan_to_num(np.asarray(image, np.float32), nan=0.0, posinf=1e30), 0.0)
+    m = x.max(axis=-1, keepdims=True)
+    span = 1.0 - KNEE
+    t = np.maximum(m - KNEE, 0.0) / span
+    scale = np.where(m > KNEE, (KNEE + span * t / (1.0 + t)) / np.maximum(m, 1e-30), 1.0)
+    return np.minimum(x * scale, 1.0)
+
+
 def linear_to_srgb8(image: np.ndarray) -> np.ndarray:
-    """sRGB-encode linear RGB (H, W, 3) float into (H, W, 3) uint8, clipping to [0, 1]."""
-    x = np.clip(np.nan_to_num(image, nan=0.0, posinf=1.0), 0.0, 1.0)
+    """sRGB-encode linear RGB (H, W, 3) float into (H, W, 3) uint8 after `tone_map`."""
+    x = tone_map(image)
     srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
     return np.round(srgb * 255).astype(np.uint8)
 

@@ -39,7 +39,7 @@ def _option(
 class RenderOptions:
     """What to render; None means the default named in each field's help."""
 
-    method: str = _option("hybrid", "rendering method")
+    method: str = _option("auto", "rendering method")
     spp: int = _option(16, "samples per pixel")
     photons: int = _option(200_000, "emitted photon paths (photon methods)")
     seed: int = _option(0, "random seed (same seed, same image)")
@@ -54,8 +54,15 @@ class RenderOptions:
         None, "initial gather radius, scene units", scoped=True,
         default_text="0.001 x the scene's bounding diagonal",
     )  # fmt: skip
+    time: float | None = _option(
+        None, "render in passes until this many seconds of wall time (from the process start)",
+        scoped=True, default_text="none: --spp passes", metavar="SECONDS",
+    )  # fmt: skip
     photons_per_pass: int | None = _option(
-        None, "emitted photon paths per pass", scoped=True, default_text="photons / 10"
+        None,
+        "emitted photon paths per pass",
+        scoped=True,
+        default_text="photons / 10; auto: planned",
     )
     checkpoint: Path | None = _option(
         None, "save the statistics here as it goes and resume from them", scoped=True,
@@ -71,7 +78,7 @@ class RenderOptions:
     )  # fmt: skip
     denoise: bool | None = _option(
         None, "Open Image Denoise with albedo and normal guides",
-        default_text="on for hybrid only",
+        default_text="on for auto and hybrid",
     )  # fmt: skip
     progress: bool = field(default=True, metadata={"cli": False})  # progress bars
 

@@ -9,19 +9,20 @@ them. Any method can be denoised (the hybrid is by default).
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 from tqdm import tqdm
 
 from dpm.camera import Camera
+from dpm.denoise import denoise, guides
 from dpm.errors import InputError
 from dpm.options import RenderOptions, validate
 from dpm.scene import Scene
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import (
     BVH,
-    VisiblePoints,
     build_bvh,
     intersect,
     shade,
@@ -68,22 +69,15 @@ def check_camera_outside(scene: Scene, bvh: BVH, camera: Camera) -> None:
             )
 
 
-def guides(points: VisiblePoints) -> tuple[np.ndarray, np.ndarray]:
-    """The denoiser's per-sample guides: (N, 3) albedo in [0, 1] and (N, 3) unit normal.
+def render(
+    scene: Scene, options: RenderOptions | None = None, started: float | None = None
+) -> RenderResult:
+    """Render `scene` with `options`; returns the linear RGB image and per-stage statistics.
 
-    Albedo is the first diffuse surface's reflectance tinted by the mirrors and glass on the
-    way (OIDN's convention for delta surfaces); a light seen directly gets its normalised
-    colour, and a miss zero albedo and normal.
+    `started` is the `time.monotonic()` from which a `--time` budget counts (default: now;
+    dpm-render passes its process start).
     """
-    albedo = np.clip(points.albedo * points.throughput, 0.0, 1.0)
-    peak = points.emitted.max(axis=1, keepdims=True)
-    light = ~points.hit & (peak[:, 0] > 0)
-    albedo[light] = points.emitted[light] / peak[light]
-    return albedo, points.normal
-
-
-def render(scene: Scene, options: RenderOptions | None = None) -> RenderResult:
-    """Render `scene` with `options`; returns the linear RGB image and per-stage statistics."""
+    started = time.monotonic() if started is None else started
     options = options or RenderOptions()
     validate(options)
     cls = options.method_class()
@@ -97,6 +91,14 @@ def render(scene: Scene, options: RenderOptions | None = None) -> RenderResult:
         bvh = build_bvh(scene)
     check_camera_outside(scene, bvh, camera)
     method.prepare(bvh, camera, watch)
+    if cls.renders_image:  # passes of its own (auto): it denoises what it should
+        image, extra = method.render_image(bvh, camera, watch, started)
+        stats.update(
+            denoised=options.denoised, width=camera.width, height=camera.height,
+            seed=options.seed, samples=camera.width * camera.height * extra["spp"],
+            triangles=int(len(scene.triangles)), bvh_nodes=bvh.n_nodes, **extra,
+        )  # fmt: skip
+        return RenderResult(image=image, stats=stats)
 
     w, h, spp = camera.width, camera.height, options.spp
     image = np.zeros((h, w, 3), np.float32)
@@ -143,8 +145,6 @@ def render(scene: Scene, options: RenderOptions | None = None) -> RenderResult:
             hits += int(points.hit.sum())
             bar.update(row1 - row0)
     if denoised:
-        from dpm.denoise import denoise
-
         with watch("denoise"):
             image = denoise(image, albedo, normal)
     stats.update(

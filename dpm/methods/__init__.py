@@ -5,7 +5,7 @@
 
 >>> from dpm.methods import METHODS, make_estimator
 >>> sorted(METHODS)[:3]
-['appm', 'dpm', 'hybrid']
+['appm', 'auto', 'cppm']
 >>> radiance = make_estimator("ppm", radius=0.02, photons_per_pass=50_000).estimate(pts, pm)
 """
 
@@ -15,6 +15,7 @@ from typing import Any
 
 from dpm.errors import InputError
 from dpm.methods.appm import AdaptivePPM
+from dpm.methods.auto import Auto
 from dpm.methods.base import Method
 from dpm.methods.cppm import ChiSquaredPPM
 from dpm.methods.dpm import DeepPhotonMapping
@@ -36,6 +37,7 @@ METHODS: dict[str, type[Method]] = {
         ChiSquaredPPM,
         DeepPhotonMapping,
         Hybrid,
+        Auto,
     )
 }
 

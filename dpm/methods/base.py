@@ -40,6 +40,7 @@ class Method:
     all_points: ClassVar[bool] = False  # needs every visible point of the image at once
     denoise: ClassVar[bool] = False  # --denoise's default
     caustic_spp: ClassVar[int | None] = None  # --caustic-spp's default (None: every sample)
+    renders_image: ClassVar[bool] = False  # renders in passes of its own (`render_image`)
     stage: ClassVar[str] = "estimate"  # the stopwatch stage of its caustic estimate
     estimator_class: ClassVar[type | None] = None  # its density estimator, if it has one
 
@@ -66,6 +67,13 @@ class Method:
         """(N, 3) float32 caustic radiance leaving each visible point (before the camera
         throughput), for methods with `at_points`."""
         raise NotImplementedError(f"{self.name} estimates no caustics at visible points")
+
+    def render_image(
+        self, bvh: BVH, camera: Camera, watch: Stopwatch, started: float
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """((H, W, 3) float32 linear RGB, stats incl. "spp") for methods with `renders_image`:
+        the whole image, its budget counted from `started` (time.monotonic())."""
+        raise NotImplementedError(f"{self.name} renders through the render loop")
 
     def caustic_pixels(self) -> np.ndarray | None:
         """(H, W, 3) float32 caustic radiance per pixel as the camera sees it, or None."""

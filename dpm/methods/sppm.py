@@ -23,7 +23,7 @@ from dpm.methods.base import Progressive
 from dpm.options import RenderOptions
 from dpm.scene import Scene
 from dpm.stopwatch import Stopwatch
-from dpm.tracer import BVH, trace_photons, trace_visible_points
+from dpm.tracer import BVH, PhotonMap, VisiblePoints, trace_photons, trace_visible_points
 
 
 def sppm_caustics(
@@ -45,7 +45,6 @@ def sppm_caustics(
     watch = watch or Stopwatch()
     state = PPMState.start(camera.width * camera.height, radius, alpha)
     n_passes = -(-n_paths // photons_per_pass)
-    n_photons = 0
     for j in tqdm(range(n_passes), unit="pass", disable=not progress, desc="sppm"):
         with watch("visible_points"):
             points = trace_visible_points(
@@ -56,18 +55,27 @@ def sppm_caustics(
                 scene, bvh, min(photons_per_pass, n_paths - j * photons_per_pass), seed,
                 caustic_only=True, first_path=j * photons_per_pass,
             )  # fmt: skip
-        with watch("estimate"):
-            n_photons += len(photons)
-            hit = np.flatnonzero(points.hit)  # one sample per pixel: row = pixel
-            index = PointIndex(points.position[hit], points.normal[hit])
-            pairs = index.within(photons, state.radius[hit], watch)
-            pixel = hit[pairs.point]
-            weight = points.throughput[pixel].astype(np.float64) * points.albedo[pixel] / np.pi
-            flux = photons.flux[pairs.photon].astype(np.float64) * photons.n_paths * weight
-            state.update(pixel, flux)  # PPM's statistics, per pixel
-            state.paths += photons.n_paths
+        sppm_gather(state, points, photons, watch)
     image = state.irradiance()  # already weighted by throughput · ρ/π: radiance
-    return image.reshape(camera.height, camera.width, 3).astype(np.float32), n_photons
+    return image.reshape(camera.height, camera.width, 3).astype(np.float32), state.photons
+
+
+def sppm_gather(
+    state: PPMState, points: VisiblePoints, photons: PhotonMap, watch: Stopwatch
+) -> None:
+    """Gather one pass of photons into per-pixel PPM statistics at this pass's visible
+    points (one sample per pixel, in pixel order); stage "estimate" counts on watch."""
+    with watch("estimate"):
+        hit = np.flatnonzero(points.hit)  # one sample per pixel: row = pixel
+        index = PointIndex(points.position[hit], points.normal[hit])
+        pairs = index.within(photons, state.radius[hit], watch)
+        pixel = hit[pairs.point]
+        weight = points.throughput[pixel].astype(np.float64) * points.albedo[pixel] / np.pi
+        flux = photons.flux[pairs.photon].astype(np.float64) * photons.n_paths * weight
+        state.update(pixel, flux)  # PPM's statistics, per pixel
+        state.paths += photons.n_paths
+        state.passes += 1
+        state.photons += len(photons)
 
 
 class StochasticPPM(Progressive):

@@ -1,0 +1,202 @@
+"""`auto`, the default: a render in passes that spends a time budget where the scene needs it.
+
+Every pass traces one camera sample per pixel, path-traces it without the caustics and, when
+the plan keeps caustics, traces a pass of photon paths into SPPM's per-pixel statistics at
+the same visible points (Hachisuka & Jensen 2009): consistent, so every pass makes the image
+better. `--time` renders passes until the budget (counted from the process start) would be
+overrun; without it `--spp` passes are rendered with `--photons` paths in all.
+
+The plan is made after the first pass, from what it found (deterministic: same seed, same
+plan): no photons where the scene has no mirror or glass, or where the first pass's photons
+add no caustic light to the image; otherwise photon paths per pass in proportion to the
+pixels. The caustic estimator is SPPM, never the network: at equal time the network's cost
+is not repaid (README, "Where DPM loses"). The path-traced image is denoised with its albedo
+and normal guides and the caustic image is added after, so the denoiser neither smears
+caustics nor paints blotches where they meet glass or shadow.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+from tqdm import tqdm
+
+from dpm.camera import Camera
+from dpm.denoise import denoise, guides
+from dpm.density.ppm import ALPHA, PPMState, check_progressive
+from dpm.density.progressive import pass_seed
+from dpm.errors import InputError
+from dpm.methods.base import Method
+from dpm.methods.sppm import sppm_gather
+from dpm.options import RenderOptions
+from dpm.scene import DIFFUSE, Scene
+from dpm.stopwatch import Stopwatch
+from dpm.tracer import BVH, VisiblePoints, shade, trace_photons, trace_visible_points
+
+RADIUS_FOOTPRINTS = 2.0  # initial radius per pixel, in pixel footprints at its first point
+PHOTONS_PER_PIXEL = 1.0  # photon paths per pass per pixel when the plan keeps caustics
+MIN_CAUSTIC_SHARE = 1e-3  # caustics under this share of the first pass's light are left out
+# Seconds kept for what follows the last pass (denoising, writing): a fixed part and per pixel.
+FINISH_SECONDS, FINISH_SECONDS_PER_PIXEL = 0.05, 3e-6
+
+
+@dataclass
+class Plan:
+    """What the render spends its passes on, and why."""
+
+    caustics: str  # "sppm" or "off"
+    photons_per_pass: int  # emitted photon paths per pass after the first (0: none)
+    reason: str  # one line for the summary and the stats JSON
+
+    def as_dict(self) -> dict[str, Any]:
+        """The plan for the stats JSON."""
+        return {"caustics": self.caustics, "photons_per_pass": self.photons_per_pass,
+                "reason": self.reason}  # fmt: skip
+
+
+def has_specular(scene: Scene) -> bool:
+    """Whether any triangle is a mirror or glass (else no light path has a caustic)."""
+    kinds = scene.materials.kind[np.unique(scene.material)]
+    return bool(np.any(kinds != DIFFUSE))
+
+
+def make_plan(
+    scene: Scene,
+    pixels: int,
+    path_light: float,
+    caustic_light: float,
+    per_pass: int | None,
+    why: str = "--photons-per-pass",
+) -> Plan:
+    """The plan after the first pass, from the light (sum over pixels of the mean RGB) its
+    path samples and its photons put in the image; `per_pass` (given `why`) overrides the
+    planned photon paths per pass."""
+    if not has_specular(scene):
+        return Plan("off", 0, "no mirror or glass in the scene: no caustics to trace")
+    share = caustic_light / max(path_light + caustic_light, 1e-30)
+    if share < MIN_CAUSTIC_SHARE:
+        return Plan(
+            "off", 0, f"the first pass's photons gave {share:.2%} of the light: caustics left out"
+        )
+    n = per_pass or max(1, round(PHOTONS_PER_PIXEL * pixels))
+    why = why if per_pass else f"{PHOTONS_PER_PIXEL:g} per pixel"
+    return Plan("sppm", n, f"caustics are {share:.1%} of the first pass's light: sppm, "
+                f"{n:,} photon paths per pass ({why})")  # fmt: skip
+
+
+def footprint_radius(points: VisiblePoints, camera: Camera) -> np.ndarray:
+    """(pixels,) float64 initial radius per pixel: RADIUS_FOOTPRINTS pixel widths at the
+    distance of its first visible point (straight from the camera; pixels that see nothing
+    get the median), so the kernel starts as wide as a few pixels wherever it is seen."""
+    pixel_angle = 2 * np.tan(np.radians(camera.fov) / 2) / camera.width
+    distance = np.linalg.norm(points.position.astype(np.float64) - camera.origin, axis=1)
+    radius = RADIUS_FOOTPRINTS * pixel_angle * distance
+    seen = points.hit & (radius > 0)
+    fill = np.median(radius[seen]) if seen.any() else 1.0
+    return np.where(seen, radius, fill)
+
+
+class Auto(Method):
+    """Path samples and SPPM photon passes, planned per scene, until the time budget."""
+
+    name = "auto"
+    summary = "the default: passes of path samples + SPPM caustics, planned per scene, until --time"
+    options = frozenset({"time", "radius", "photons_per_pass"})
+    denoise = True
+    renders_image: ClassVar[bool] = True
+
+    @classmethod
+    def check(cls, options: RenderOptions) -> None:
+        """A positive --time, --radius and --photons-per-pass."""
+        if options.time is not None and not (np.isfinite(options.time) and options.time > 0):
+            raise InputError(f"--time must be a positive number of seconds (got {options.time})")
+        radius, per_pass = options.radius, options.photons_per_pass
+        check_progressive(1.0 if radius is None else radius, per_pass or 1, ALPHA)
+
+    def render_image(
+        self, bvh: BVH, camera: Camera, watch: Stopwatch, started: float
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """(H, W, 3) float32 linear RGB and the plan's stats: passes until the budget."""
+        o, scene = self.options, self.scene
+        w, h = camera.width, camera.height
+        pixels = w * h
+        full = o.component == "full"
+        state = PPMState.start(pixels, o.radius or 1.0, ALPHA)  # radii set at the first pass
+        path_sum = np.zeros((pixels, 3), np.float64)
+        albedo, normal = np.zeros((pixels, 3), np.float64), np.zeros((pixels, 3), np.float64)
+        deadline = None if o.time is None else started + o.time
+        finish = FINISH_SECONDS + FINISH_SECONDS_PER_PIXEL * pixels * (full and self.denoised)
+        # Photon paths per pass: --photons-per-pass, else without a budget --photons shared
+        # by the --spp passes, else the plan's (the first pass already uses it, so a --time
+        # render of N passes is the --spp N render with the plan's --photons-per-pass).
+        given = o.photons_per_pass or (None if o.time is not None else max(1, o.photons // o.spp))
+        why = "--photons-per-pass" if o.photons_per_pass else "--photons / --spp"
+        plan = None
+        first_photons = given or max(1, round(PHOTONS_PER_PIXEL * pixels))
+        if not has_specular(scene):
+            plan = make_plan(scene, pixels, 1.0, 0.0, None)
+        dropped = 0
+        total = o.spp if deadline is None else None
+        bar = tqdm(total=total, unit="pass", disable=not o.progress, desc=self.name)
+        j = last = 0
+        begun = time.monotonic()
+        while True:
+            seed = pass_seed(o.seed, j)
+            with watch("visible_points"):
+                points = trace_visible_points(scene, bvh, camera, 1, seed, (0, h))
+            if j == 0 and o.radius is None:
+                state.radius = footprint_radius(points, camera)
+            if full:
+                with watch("shade"):
+                    reflected, bad = shade(scene, bvh, points, seed, caustics=False)
+                    path_sum += points.emitted + points.throughput * reflected
+                dropped += bad
+                a, n = guides(points)
+                albedo += a
+                normal += n
+            n_paths = first_photons if plan is None else plan.photons_per_pass
+            if n_paths and (plan is None or plan.caustics != "off"):
+                with watch("photons"):
+                    photons = trace_photons(
+                        scene, bvh, n_paths, o.seed, caustic_only=True, first_path=state.paths
+                    )
+                sppm_gather(state, points, photons, watch)
+            if plan is None:
+                path_light = float(path_sum.mean(axis=1).sum()) if full else 0.0
+                caustic_light = float(state.irradiance().mean(axis=1).sum())
+                plan = make_plan(scene, pixels, path_light, caustic_light, given, why)
+            j += 1
+            bar.update(1)
+            now = time.monotonic()
+            last, begun = now - begun, now  # a pass's time includes what runs between passes
+            if deadline is None:
+                if j >= o.spp:
+                    break
+            elif now + last + finish > deadline:
+                break
+        bar.close()
+        self.passes, self.plan, self.caustic_photons = j, plan, state.photons
+        self.dropped = dropped
+        caustic = state.irradiance().astype(np.float32)  # weighted by throughput · ρ/π
+        if not full:
+            return caustic.reshape(h, w, 3), self.stats()
+        image = (path_sum / j).astype(np.float32).reshape(h, w, 3)
+        if self.denoised:
+            with watch("denoise"):
+                image = denoise(image, (albedo / j).reshape(h, w, 3), (normal / j).reshape(h, w, 3))
+        return image + caustic.reshape(h, w, 3), self.stats()
+
+    @property
+    def denoised(self) -> bool:
+        """Whether the path-traced part goes through the denoiser."""
+        return self.options.denoised
+
+    def stats(self) -> dict[str, Any]:
+        """Passes, the plan, photon paths and caustic photons."""
+        return {
+            "passes": self.passes, "plan": self.plan.as_dict(), "spp": self.passes,
+            "caustic_photons": self.caustic_photons, "nonfinite_samples": self.dropped,
+        }  # fmt: skip

@@ -1,0 +1,189 @@
+"""`auto`, the default render: time budget, plan, reproducibility, denoising split, tone map."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import write_scene
+from dpm import load_scene
+from dpm.io import KNEE, linear_to_srgb8, tone_map
+from dpm.methods import auto
+from dpm.render import RenderOptions, render
+
+# The floor and light of conftest, and a glass slab between them: caustics.
+GLASS_OBJ = """\
+mtllib scene.mtl
+v -1 0 -1
+v 1 0 -1
+v 1 0 1
+v -1 0 1
+v -0.1 1 -0.1
+v 0.1 1 -0.1
+v 0.1 1 0.1
+v -0.1 1 0.1
+v -0.3 0.5 -0.3
+v 0.3 0.5 -0.3
+v 0.3 0.5 0.3
+v -0.3 0.5 0.3
+v -0.3 0.4 -0.3
+v 0.3 0.4 -0.3
+v 0.3 0.4 0.3
+v -0.3 0.4 0.3
+usemtl floor
+f 1 4 3 2
+usemtl light
+f 5 6 7 8
+usemtl glass
+f 9 12 11 10
+f 13 14 15 16
+"""
+GLASS_MTL = """\
+newmtl floor
+Kd 0.5 0.5 0.5
+newmtl light
+Ke 10 10 10
+newmtl glass
+illum 7
+Ni 1.5
+"""
+CAMERA = """\
+[camera]
+origin = [0, 2.5, 2.5]
+target = [0, 0, 0]
+up = [0, 1, 0]
+fov = 50
+width = 24
+height = 16
+"""
+
+
+class FakeClock:
+    """time.monotonic stand-in: each call advances `step` seconds."""
+
+    def __init__(self, step: float) -> None:
+        self.now, self.step = 0.0, step
+
+    def monotonic(self) -> float:
+        self.now += self.step
+        return self.now
+
+
+@pytest.fixture
+def glass(tmp_path: Path):
+    return load_scene(write_scene(tmp_path, GLASS_OBJ, GLASS_MTL, CAMERA))
+
+
+@pytest.fixture
+def diffuse(tmp_path: Path):
+    return load_scene(write_scene(tmp_path, toml=CAMERA))
+
+
+def options(**kw) -> RenderOptions:
+    return RenderOptions(method="auto", progress=False, **kw)
+
+
+def test_a_tiny_budget_renders_one_pass(glass) -> None:
+    result = render(glass, options(time=1e-6))
+    assert result.stats["passes"] == 1 and result.stats["spp"] == 1
+    assert np.isfinite(result.image).all() and result.image.mean() > 0
+
+
+def test_the_budget_stops_before_the_pass_that_would_overrun_it(glass, monkeypatch) -> None:
+    # The clock is read before the first pass and after each: with a 0.1 s tick a pass
+    # lasts 0.1 s and pass j ends at 0.1 (j + 1). The render must stop after the first pass
+    # whose successor would end past the budget less the finishing reserve.
+    monkeypatch.setattr(auto, "time", FakeClock(0.1))
+    budget = 2.0
+    finish = auto.FINISH_SECONDS + auto.FINISH_SECONDS_PER_PIXEL * 24 * 16
+    result = render(glass, options(time=budget), started=0.0)
+    expected = next(j for j in range(1, 100) if 0.1 * (j + 1) + 0.1 + finish > budget)
+    assert result.stats["passes"] == expected
+    assert 0.1 * (expected + 1) + finish <= budget  # the last pass ended inside the budget
+
+
+def test_a_budgeted_render_is_reproduced_by_its_pass_count(glass, monkeypatch) -> None:
+    monkeypatch.setattr(auto, "time", FakeClock(0.1))
+    timed = render(glass, options(time=1.0, seed=4), started=0.0)
+    plan = timed.stats["plan"]
+    assert plan["caustics"] == "sppm" and timed.stats["caustic_photons"] > 0
+    again = render(
+        glass, options(spp=timed.stats["passes"], photons_per_pass=plan["photons_per_pass"],
+                       seed=4),
+    )  # fmt: skip
+    np.testing.assert_array_equal(timed.image, again.image)
+    other = render(glass, options(spp=timed.stats["passes"], seed=5))
+    assert not np.array_equal(timed.image, other.image)
+
+
+def test_same_seed_same_image_whatever_the_thread_count(glass) -> None:
+    import numba
+
+    images = []
+    for threads in (1, numba.config.NUMBA_NUM_THREADS):
+        numba.set_num_threads(threads)
+        images.append(render(glass, options(spp=3, seed=2)).image)
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    np.testing.assert_array_equal(*images)
+
+
+def test_a_scene_without_mirror_or_glass_traces_no_photons(diffuse) -> None:
+    result = render(diffuse, options(spp=2))
+    plan = result.stats["plan"]
+    assert plan["caustics"] == "off" and plan["photons_per_pass"] == 0
+    assert "no mirror or glass" in plan["reason"]
+    assert result.stats["caustic_photons"] == 0
+
+
+def test_the_default_render_never_loads_the_network(tmp_path: Path) -> None:
+    # auto never runs the network: JAX (the network's only user) is not even imported.
+    path = write_scene(tmp_path, GLASS_OBJ, GLASS_MTL, CAMERA)
+    code = (
+        "import sys; from dpm.cli import render_main; "
+        f"assert render_main([{str(path)!r}, '--spp', '2', '-o', {str(tmp_path / 'o.exr')!r},"
+        " '--quiet']) == 0; "
+        "assert 'jax' not in sys.modules, 'the default render imported JAX'"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_caustics_are_added_after_the_denoiser(glass, monkeypatch) -> None:
+    # The denoiser sees only the path-traced part: its input has no caustic light.
+    seen = []
+
+    def spy(color, albedo, normal):
+        seen.append(color.copy())
+        return color
+
+    monkeypatch.setattr(auto, "denoise", spy)
+    full = render(glass, options(spp=2, seed=1)).image
+    caustic = render(glass, options(spp=2, seed=1, component="caustic")).image
+    nocaustic = render(glass, options(spp=2, seed=1, denoise=False)).image - caustic
+    assert caustic.max() > 0
+    np.testing.assert_allclose(seen[0], nocaustic, atol=1e-6)
+    np.testing.assert_allclose(full, seen[0] + caustic, atol=1e-6)
+
+
+def test_the_tone_map_keeps_shadows_and_never_clips_highlights() -> None:
+    x = np.linspace(0, 50, 2001, dtype=np.float32)
+    grey = tone_map(np.repeat(x[None, :, None], 3, axis=2))[0, :, 0]
+    below = x <= KNEE
+    np.testing.assert_allclose(grey[below], x[below], rtol=1e-6)
+    assert np.all(np.diff(grey) > 0) and grey.max() < 1.0  # strictly increasing: no clip
+    colour = tone_map(np.array([[[4.0, 2.0, 1.0]]], np.float32))[0, 0]
+    np.testing.assert_allclose(colour / colour[0], [1.0, 0.5, 0.25], rtol=1e-6)  # hue kept
+    assert linear_to_srgb8(np.full((1, 1, 3), np.nan, np.float32)).max() == 0
+
+
+def test_bad_budgets_are_refused(glass) -> None:
+    from dpm.errors import InputError
+
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(InputError, match="--time"):
+            render(glass, options(time=bad))
+    with pytest.raises(InputError, match="--time applies to auto only"):
+        render(glass, RenderOptions(method="ppm", time=1.0, progress=False))
