@@ -111,10 +111,8 @@ def test_a_budgeted_render_is_reproduced_by_its_pass_count(glass, monkeypatch) -
     timed = render(glass, options(time=1.0, seed=4), started=0.0)
     plan = timed.stats["plan"]
     assert plan["caustics"] == "sppm" and timed.stats["caustic_photons"] > 0
-    again = render(
-        glass, options(spp=timed.stats["passes"], photons_per_pass=plan["photons_per_pass"],
-                       seed=4),
-    )  # fmt: skip
+    n = timed.stats["passes"]
+    again = render(glass, options(spp=n, photons=n * plan["photons_per_pass"], seed=4))
     np.testing.assert_array_equal(timed.image, again.image)
     other = render(glass, options(spp=timed.stats["passes"], seed=5))
     assert not np.array_equal(timed.image, other.image)

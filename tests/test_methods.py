@@ -75,7 +75,7 @@ def test_flags_and_sidecar_keys_come_from_the_options_dataclass(capsys) -> None:
     assert code == 0
     for f in cli_fields():
         assert "--" + f.name.replace("_", "-") in out
-    assert "(default: 16)" in out and "(default: hybrid)" in out  # --help shows defaults
+    assert "(default: 16)" in out and "(default: auto)" in out  # --help shows defaults
     for name in METHODS:
         assert f"{name}:" in out  # the methods' one-line summaries
     assert set(sidecar_types()) >= {"method", "spp", "photons", "k", "seed", "radius"}

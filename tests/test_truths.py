@@ -168,9 +168,12 @@ def caustic_image(truth: Truth, method: str, photons: int, seed: int) -> np.ndar
     """The method's caustic component (H, W), grey, 1 sample per pixel."""
     # each method gets only the scoped options it reads
     settings = {k: v for k, v in SETTINGS.items() if k in method_class(method).options}
+    spp = 1
+    if method_class(method).renders_image:  # auto: a pass per camera sample, the same paths
+        spp = photons // settings.pop("photons_per_pass")  # per pass as the other progressives
     options = RenderOptions(
         method=method,
-        spp=1,
+        spp=spp,
         photons=photons,
         seed=seed,
         component="caustic",

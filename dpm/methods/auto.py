@@ -29,7 +29,7 @@ from dpm.denoise import denoise, guides
 from dpm.density.ppm import ALPHA, PPMState, check_progressive
 from dpm.density.progressive import pass_seed
 from dpm.errors import InputError
-from dpm.methods.base import Method
+from dpm.methods.base import Method, check_photons
 from dpm.methods.sppm import sppm_gather
 from dpm.options import RenderOptions
 from dpm.scene import DIFFUSE, Scene
@@ -110,7 +110,11 @@ class Auto(Method):
 
     @classmethod
     def check(cls, options: RenderOptions) -> None:
-        """A positive --time, --radius and --photons-per-pass."""
+        """At least one photon path, a positive --time, --radius and --photons-per-pass."""
+        check_photons(options)
+        if options.time is None and options.photons_per_pass is not None:
+            raise InputError("--photons-per-pass applies to auto with --time only (without it,"
+                             " --spp passes share --photons paths)")  # fmt: skip
         if options.time is not None and not (np.isfinite(options.time) and options.time > 0):
             raise InputError(f"--time must be a positive number of seconds (got {options.time})")
         radius, per_pass = options.radius, options.photons_per_pass
@@ -129,11 +133,13 @@ class Auto(Method):
         albedo, normal = np.zeros((pixels, 3), np.float64), np.zeros((pixels, 3), np.float64)
         deadline = None if o.time is None else started + o.time
         finish = FINISH_SECONDS + FINISH_SECONDS_PER_PIXEL * pixels * (full and self.denoised)
-        # Photon paths per pass: --photons-per-pass, else without a budget --photons shared
-        # by the --spp passes, else the plan's (the first pass already uses it, so a --time
-        # render of N passes is the --spp N render with the plan's --photons-per-pass).
-        given = o.photons_per_pass or (None if o.time is not None else max(1, o.photons // o.spp))
-        why = "--photons-per-pass" if o.photons_per_pass else "--photons / --spp"
+        # Photon paths per pass: without a budget, --photons shared by the --spp passes; with
+        # one, --photons-per-pass or the plan's (the first pass already uses it, so a --time
+        # render of N passes of P paths is the render with --spp N --photons N·P).
+        if o.time is None:
+            given, why = max(1, o.photons // o.spp), "--photons / --spp"
+        else:
+            given, why = o.photons_per_pass, "--photons-per-pass"
         plan = None
         first_photons = given or max(1, round(PHOTONS_PER_PIXEL * pixels))
         if not has_specular(scene):

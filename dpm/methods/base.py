@@ -92,11 +92,7 @@ class PhotonMethod(Method):
     @classmethod
     def check(cls, options: RenderOptions) -> None:
         """Raise InputError when no photons would be traced."""
-        if options.photons < 1:
-            raise InputError(
-                f"--photons must be at least 1 for method {options.method} (for an image "
-                "without caustics use --method pt-nocaustic)"
-            )
+        check_photons(options)
 
     def stats(self) -> dict[str, Any]:
         """Emitted paths, the caustic photons they gave and the caustic samples per pixel."""
@@ -184,6 +180,15 @@ class Progressive(PhotonMethod):
         """PhotonMethod's stats, the initial radius and the paths per pass."""
         extra = {"radius": self.est.radius, "photons_per_pass": self.est.photons_per_pass}
         return {**super().stats(), **extra}
+
+
+def check_photons(options: RenderOptions) -> None:
+    """Raise InputError when a photon method is given fewer than one photon path."""
+    if options.photons < 1:
+        raise InputError(
+            f"--photons must be at least 1 for method {options.method} (for an image "
+            "without caustics use --method pt-nocaustic)"
+        )
 
 
 def default_radius(scene: Scene) -> float:
