@@ -8,7 +8,8 @@ Python process that imports Mitsuba (variant llvm_ad_rgb), loads the scene (conv
 beforehand by the project's converter, untimed: PLY files and a JSON description), renders
 `path` (its defaults: unbounded depth, Russian roulette from depth 5) with albedo and normal
 AOVs, denoises with the same OIDN call as dpm and saves the image. Its samples per pixel are
-fitted to dpm's measured wall time from two calibration runs (wall = fixed + per-spp cost).
+fitted to dpm's measured wall time from two calibration runs (wall = fixed + per-spp cost),
+with one correction run where the fit missed by more than 5 %.
 Both run once untimed first (Numba's and Dr.Jit's kernel caches warm, as on a user's second
 run). Scored by RMSE against the converged reference of `benchmarks/hybrid.py` (pt-nocaustic
 at REF_SPP plus the PPM caustic reference), cached per scene and size.
@@ -130,6 +131,10 @@ def run_scene(name: str, width: int, times: list[float]) -> dict:
             ours, ours_s, stats = dpm_run(path, width, height, budget, i + 1, folder)
             spp = max(1, round((ours_s - fixed) / per_spp))
             theirs, theirs_s = mitsuba_run(desc, spp, i + 1)
+            if abs(theirs_s - ours_s) > 0.05 * ours_s:  # the fit missed: one secant step
+                rate = max(theirs_s - fixed, 1e-3) / spp
+                spp = max(1, round((ours_s - fixed) / rate))
+                theirs, theirs_s = mitsuba_run(desc, spp, i + 1)
             rows.append({
                 "budget": budget, "dpm_s": ours_s, "dpm_rmse": rmse(ours, ref),
                 "passes": stats["passes"], "plan": stats["plan"]["reason"],
@@ -176,6 +181,14 @@ def report(records: list[dict]) -> str:
         f" worst {max(ratios):.2f}. Target: at most 0.7 everywhere.",
         "",
         "Where it loses (ratio above 0.7): " + ("; ".join(losses) or "nowhere") + ".",
+        "",
+        "Caveat: the references are not converged everywhere. Their path-traced part (4096 spp)",
+        "keeps fireflies where a small light is seen or lit through glass (visible as white",
+        "dots in the reference images), and on the pools, the dragon and the glass egg both",
+        "renderers' RMSE stays nearly flat as the budget grows: there the reference's own noise",
+        "sets the floor and blocks a verdict (on the dragon, 20 pixels held 94 % of the squared",
+        "error of a 64-pass render). Such scenes need a longer reference before their ratio means",
+        "anything.",
         "",
         f"Mitsuba's fixed cost per process (start, JIT, denoise; fitted): {fixed} s.",
         "",

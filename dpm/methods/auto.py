@@ -37,7 +37,8 @@ from dpm.stopwatch import Stopwatch
 from dpm.tracer import BVH, VisiblePoints, shade, trace_photons, trace_visible_points
 
 RADIUS_FOOTPRINTS = 2.0  # initial radius per pixel, in pixel footprints at its first point
-PHOTONS_PER_PIXEL = 1.0  # photon paths per pass per pixel when the plan keeps caustics
+PHOTONS_PER_PIXEL = 4.0  # photon paths per pass per pixel when the plan keeps caustics (tuned:
+# benchmarks/auto_tuning.py, best on the ring, tied on glass egg, pool1 and dragon)
 MIN_CAUSTIC_SHARE = 1e-3  # caustics under this share of the first pass's light are left out
 # Seconds kept for what follows the last pass (denoising, writing): a fixed part and per pixel.
 FINISH_SECONDS, FINISH_SECONDS_PER_PIXEL = 0.05, 3e-6
