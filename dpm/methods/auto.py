@@ -10,7 +10,7 @@ The plan is made after the first pass, from what it found (deterministic: same s
 plan): no photons where the scene has no mirror or glass, or where the first pass's photons
 add no caustic light to the image; otherwise photon paths per pass in proportion to the
 pixels. The caustic estimator is SPPM, never the network: at equal time the network's cost
-is not repaid (README, "Where DPM loses"). The path-traced image is denoised with its albedo
+is not repaid (benchmarks/results/dpm.md). The path-traced image is denoised with its albedo
 and normal guides and the caustic image is added after, so the denoiser neither smears
 caustics nor paints blotches where they meet glass or shadow.
 """
@@ -133,7 +133,7 @@ class Auto(Method):
         path_sum = np.zeros((pixels, 3), np.float64)
         albedo, normal = np.zeros((pixels, 3), np.float64), np.zeros((pixels, 3), np.float64)
         deadline = None if o.time is None else started + o.time
-        finish = FINISH_SECONDS + FINISH_SECONDS_PER_PIXEL * pixels * (full and self.denoised)
+        finish = FINISH_SECONDS + FINISH_SECONDS_PER_PIXEL * pixels * (full and o.denoised)
         # Photon paths per pass: without a budget, --photons shared by the --spp passes; with
         # one, --photons-per-pass or the plan's (the first pass already uses it, so a --time
         # render of N passes of P paths is the render with --spp N --photons N·P).
@@ -191,15 +191,10 @@ class Auto(Method):
         if not full:
             return caustic.reshape(h, w, 3), self.stats()
         image = (path_sum / j).astype(np.float32).reshape(h, w, 3)
-        if self.denoised:
+        if o.denoised:
             with watch("denoise"):
                 image = denoise(image, (albedo / j).reshape(h, w, 3), (normal / j).reshape(h, w, 3))
         return image + caustic.reshape(h, w, 3), self.stats()
-
-    @property
-    def denoised(self) -> bool:
-        """Whether the path-traced part goes through the denoiser."""
-        return self.options.denoised
 
     def stats(self) -> dict[str, Any]:
         """Passes, the plan, photon paths and caustic photons."""
