@@ -31,3 +31,18 @@ def reflected(albedo: np.ndarray, irradiance: np.ndarray) -> np.ndarray:
 def luminance(rgb: np.ndarray) -> np.ndarray:
     """(…) Rec. 709 luminance of linear RGB (…, 3)."""
     return rgb @ np.array([0.2126, 0.7152, 0.0722])
+
+
+def tangent_frame(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two (Q, 3) float64 unit tangents orthogonal to unit normals (Q, 3) and to each other."""
+    n = np.asarray(normal, np.float64)
+    axis = np.where(np.abs(n[:, :1]) > 0.9, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]])
+    t = np.cross(n, axis)
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    return t, np.cross(n, t)
+
+
+def in_plane(v: np.ndarray, t: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(Q, 2) float64 components of vectors v (Q, 3) along tangents t and b (Q, 3)."""
+    v = np.asarray(v, np.float64)
+    return np.stack([np.einsum("ij,ij->i", v, t), np.einsum("ij,ij->i", v, b)], axis=1)

@@ -20,6 +20,7 @@ from dpm.methods.base import Method
 from dpm.methods.cppm import ChiSquaredPPM
 from dpm.methods.dpm import DeepPhotonMapping
 from dpm.methods.hybrid import Hybrid
+from dpm.methods.nppm import NeuralPPM
 from dpm.methods.pm import PhotonMapping
 from dpm.methods.ppm import ProgressivePhotonMapping
 from dpm.methods.pt import PathTracing, PathTracingNoCaustics
@@ -36,6 +37,7 @@ METHODS: dict[str, type[Method]] = {
         AdaptivePPM,
         ChiSquaredPPM,
         DeepPhotonMapping,
+        NeuralPPM,
         Hybrid,
         Auto,
     )
@@ -57,5 +59,6 @@ def caustic_methods() -> tuple[str, ...]:
 
 
 def make_estimator(name: str, **params: Any) -> Any:
-    """The density estimator behind method `name` (pm, ppm, appm, dpm) with its parameters."""
+    """The density estimator behind method `name` (pm, ppm, appm, cppm, dpm, nppm) with its
+    parameters."""
     return method_class(name).make_estimator(**params)

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import chdtri  # not scipy.stats: its import costs ~0.8 s at start
 
+from dpm.density.base import in_plane, tangent_frame
 from dpm.density.gather import PointIndex
 from dpm.density.ppm import PPMState, Progressive
 from dpm.density.progressive import ALPHA
@@ -35,15 +36,6 @@ CELLS = 8  # equal-area cells of the disc: 2 rings × 4 quadrants
 MIN_EXPECTED = 5  # photons each cell must expect before the test is trusted (the usual rule)
 SIGNIFICANCE = 0.05  # chance of calling a uniform disc non-uniform (then it shrinks, as PPM)
 CRITICAL = float(chdtri(CELLS - 1, SIGNIFICANCE))  # 14.07: χ² upper quantile
-
-
-def tangent_frame(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Two (Q, 3) float64 unit tangents orthogonal to unit normals (Q, 3) and to each other."""
-    n = np.asarray(normal, np.float64)
-    axis = np.where(np.abs(n[:, :1]) > 0.9, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]])
-    t = np.cross(n, axis)
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
-    return t, np.cross(n, t)
 
 
 @dataclass
@@ -68,9 +60,8 @@ class CPPMState(PPMState):
         offset = photons.position[pairs.photon].astype(np.float64) - index.position[point]
         t, b = tangent_frame(index.normal[point])
         outer = pairs.distance**2 > self.radius[point] ** 2 / 2
-        quadrant = 2 * (np.einsum("ij,ij->i", offset, t) > 0) + (
-            np.einsum("ij,ij->i", offset, b) > 0
-        )
+        ab = in_plane(offset, t, b)
+        quadrant = 2 * (ab[:, 0] > 0) + (ab[:, 1] > 0)
         cell = CELLS // 2 * outer + quadrant
         self.cells += np.bincount(point * CELLS + cell, minlength=n * CELLS).reshape(n, CELLS)
         found = np.bincount(point, minlength=n).astype(np.float64)

@@ -17,7 +17,9 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
-from dpm.nn.features import flux_unmap
+from dpm.density.shaped import FEATURES
+from dpm.nn.features import CHANNELS, flux_unmap
+from dpm.nn.shape_net import ShapeNet
 
 # softplus(x + SHIFT) = 1 at x = 0: a zero last layer starts as the uniform kernel (PM), and
 # weights stay positive, so the estimate is never negative.
@@ -70,10 +72,21 @@ class DirectNet(nn.Module):
         return flux_unmap(2.0 * jax.nn.sigmoid(nn.Dense(3)(z)) - 1.0)
 
 
-ARCHITECTURES = {"dpm": (KernelNet, 1), "dpm-l": (KernelNet, 4), "direct": (DirectNet, 1)}
+ARCHITECTURES = {
+    "dpm": (KernelNet, 1), "dpm-l": (KernelNet, 4), "direct": (DirectNet, 1),
+    "nppm": (ShapeNet, 1),
+}  # fmt: skip
 
 
 def make_model(architecture: str, width: int = 32) -> nn.Module:
-    """The network called 'dpm', 'dpm-l' (4× channels) or 'direct', base width `width`."""
+    """The network called 'dpm', 'dpm-l' (4× channels), 'direct' or 'nppm' (the shape network
+    of dpm.nn.shape_net), base width `width`."""
     cls, factor = ARCHITECTURES[architecture]
     return cls(width=width * factor)
+
+
+def example_input(architecture: str, k: int) -> tuple[jnp.ndarray, ...]:
+    """Zero arguments of the right shapes for `init` of network `architecture` on K photons."""
+    if architecture == "nppm":
+        return (jnp.zeros(FEATURES, jnp.float32),)
+    return jnp.zeros((k, CHANNELS), jnp.float32), jnp.ones(k, bool)

@@ -86,7 +86,8 @@ class RunFolder:
         with atomic(stamp) as tmp:
             tmp.write_text(json.dumps(identity, indent=1))
         m, t = config.model, config.train
-        self.title = f"{m.architecture}, K = {m.k}, {t.loss} loss"
+        what = m.architecture if m.architecture == "nppm" else f"{m.architecture}, K = {m.k}"
+        self.title = f"{what}, {t.loss} loss"
         self.weights = self.out / "model.msgpack"
         self._ocp = ocp
         options = ocp.CheckpointManagerOptions(max_to_keep=2, enable_async_checkpointing=False)

@@ -28,11 +28,12 @@ from tqdm import tqdm
 from dpm.data.dataset import build
 from dpm.nn.config import Config
 from dpm.nn.features import kernel_estimate
-from dpm.nn.infer import Batch, point_radiance
+from dpm.nn.infer import point_radiance
 from dpm.nn.losses import training_loss
-from dpm.nn.model import make_model
+from dpm.nn.model import example_input, make_model
 from dpm.nn.run_folder import RunFolder
 from dpm.nn.sampler import Sampler
+from dpm.nn.shape_training import ShapeSampler, make_shape_steps
 from dpm.nn.sharding import DataParallel
 from dpm.nn.weights import Weights, save_weights
 
@@ -64,10 +65,9 @@ def make_steps(
     return optimiser, jax.jit(loss), step
 
 
-def init_params(model, k: int, seed: int) -> dict:
-    """Fresh parameters for `model` on K photons."""
-    x = jnp.zeros((k, 9), jnp.float32)
-    return model.init(jax.random.key(seed), x, jnp.ones(k, bool))
+def init_params(model, k: int, seed: int, architecture: str = "dpm") -> dict:
+    """Fresh parameters for network `architecture` (`model`) on K photons."""
+    return model.init(jax.random.key(seed), *example_input(architecture, k))
 
 
 def train(config: Config, progress: bool = True) -> tuple[dict, list[dict]]:
@@ -83,18 +83,21 @@ def train(config: Config, progress: bool = True) -> tuple[dict, list[dict]]:
     devices.check("[train] validation_points", t.validation_points)
     manifest = build(config.data, progress=progress)
     n = len(manifest["shards"])
-    sampler = Sampler(config, manifest, list(range(n - t.validation_scenes)))
-    validation = Sampler(config, manifest, list(range(n - t.validation_scenes, n)))
+    nppm = m.architecture == "nppm"  # the shape network: its own samples and loss
+    sampler_class = ShapeSampler if nppm else Sampler
+    sampler = sampler_class(config, manifest, list(range(n - t.validation_scenes)))
+    validation = sampler_class(config, manifest, list(range(n - t.validation_scenes, n)))
     val_batch, val_target, val_part = devices.split(
         validation.draw(np.random.default_rng((t.seed, 1 << 30)), t.validation_points,
                         max(1, len(validation.choices)))
     )  # fmt: skip
     run = RunFolder(config)
     model = make_model(m.architecture, m.width)
-    optimiser, loss, step = make_steps(model, t.learning_rate, t.loss, t.balance)
-    params = devices.replicate(init_params(model, m.k, t.seed))
+    steps = make_shape_steps if nppm else make_steps
+    optimiser, loss, step = steps(model, t.learning_rate, t.loss, t.balance)
+    params = devices.replicate(init_params(model, m.k, t.seed, m.architecture))
     done, params, opt_state, rows = run.restore(params, devices.replicate(optimiser.init(params)))
-    if not rows:  # step 0: the fresh network (for DPM, the uniform kernel: PM-K)
+    if not rows:  # step 0: the fresh network (the uniform kernel: PM-K for DPM, PPM for nppm)
         value = f"{float(loss(params, val_batch, val_target, val_part)):.6g}"
         rows.append({"step": 0, "loss": "", "validation_loss": value, "seconds": "0.00"})
 
@@ -104,7 +107,7 @@ def train(config: Config, progress: bool = True) -> tuple[dict, list[dict]]:
     offset = float(rows[-1]["seconds"]) if rows else 0.0
     try:
 
-        def draw(s: int) -> tuple[Batch, np.ndarray, np.ndarray]:
+        def draw(s: int) -> tuple:
             rng = np.random.default_rng((t.seed, s))
             return devices.split(sampler.draw(rng, t.batch, t.scenes_per_batch))
 

@@ -12,14 +12,12 @@ from pathlib import Path
 
 import flax.linen as nn
 import jax
-import jax.numpy as jnp
 import numpy as np
 from flax import serialization, traverse_util
 
 from dpm.errors import InputError
 from dpm.io import atomic
-from dpm.nn.features import CHANNELS
-from dpm.nn.model import ARCHITECTURES, make_model
+from dpm.nn.model import ARCHITECTURES, example_input, make_model
 
 SHIPPED = Path(__file__).parent / "weights"
 
@@ -28,9 +26,9 @@ SHIPPED = Path(__file__).parent / "weights"
 class Weights:
     """A trained network: its architecture, base width, K and parameters."""
 
-    architecture: str  # 'dpm', 'dpm-l' or 'direct'
+    architecture: str  # 'dpm', 'dpm-l', 'direct' or 'nppm'
     width: int  # base channel count (×4 for 'dpm-l')
-    k: int  # neighbours per visible point it was trained with
+    k: int  # neighbours per visible point it was trained with (unused by nppm)
     params: dict  # flax parameter pytree (numpy arrays)
 
     def model(self) -> nn.Module:
@@ -65,10 +63,8 @@ def load_weights(path: str | Path) -> Weights:
         raise InputError(f"{path}: not a dpm weight file ({type(e).__name__})") from None
     if weights.architecture not in ARCHITECTURES or weights.k < 1 or weights.width < 1:
         raise InputError(f"{path}: not a dpm weight file (bad architecture, width or k)")
-    expected = jax.eval_shape(
-        weights.model().init, jax.random.key(0), jnp.zeros((weights.k, CHANNELS)),
-        jnp.ones(weights.k, bool),
-    )  # fmt: skip
+    inputs = example_input(weights.architecture, weights.k)
+    expected = jax.eval_shape(weights.model().init, jax.random.key(0), *inputs)
 
     def shapes(tree: object) -> dict:
         return {k: tuple(v.shape) for k, v in traverse_util.flatten_dict(tree).items()}
