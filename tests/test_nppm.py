@@ -149,3 +149,25 @@ def test_a_missing_or_foreign_weight_file_is_refused(tmp_path: Path) -> None:
     (tmp_path / "bad.msgpack").write_bytes(b"junk")
     with pytest.raises(InputError, match="not a dpm weight file"):
         NPPM(weights=str(tmp_path / "bad.msgpack")).check()
+
+
+def test_dpm_render_nppm_with_a_fresh_network_is_ppm(tmp_path: Path, capsys) -> None:
+    from dpm.cli import render_main
+    from dpm.io import read_exr
+
+    scene = Path(__file__).parent.parent / "examples" / "scenes" / "glass_egg.obj"
+    base = [str(scene), "--quiet", "--width", "16", "--height", "16", "--spp", "1",
+            "--photons", "40000", "--photons-per-pass", "10000"]  # fmt: skip
+    fresh = network(tmp_path / "fresh.msgpack")
+    for method, extra in (("ppm", []), ("nppm", ["--weights", fresh])):
+        out = tmp_path / f"{method}.exr"
+        assert render_main([*base, "-o", str(out), "--method", method, *extra]) == 0
+    np.testing.assert_array_equal(read_exr(tmp_path / "nppm.exr"), read_exr(tmp_path / "ppm.exr"))
+    (tmp_path / "bad.msgpack").write_bytes(b"junk")
+    out = tmp_path / "bad.png"
+    code = render_main(
+        [*base, "-o", str(out), "--method", "nppm", "--weights", str(tmp_path / "bad.msgpack")]
+    )
+    err = capsys.readouterr().err
+    assert code == 2 and "not a dpm weight file" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
