@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy.integrate import dblquad
+from test_density import egg, plane_photons, plane_points, relative_error  # noqa: F401
 
 from dpm.density import PPM
 from dpm.density.nppm import NPPM
@@ -17,7 +18,6 @@ from dpm.errors import InputError
 from dpm.nn.model import make_model
 from dpm.nn.train import init_params
 from dpm.nn.weights import Weights, save_weights
-from tests.test_density import egg, plane_photons, plane_points, relative_error  # noqa: F401
 
 PLANE = dict(radius=0.08)
 

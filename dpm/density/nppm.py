@@ -110,9 +110,7 @@ class NPPMState(PPMState):
             return weight
         with watch(NETWORK):
             p = np.zeros((len(self.radius), 2))
-            p[shaped] = predictor(self.weights)(
-                features(self.moments[shaped])
-            )
+            p[shaped] = predictor(self.weights)(features(self.moments[shaped]))
             cos, sin = principal_axes(self.moments)
             sel = np.flatnonzero(self.moments[point, 0] > 0)
             q = point[sel]

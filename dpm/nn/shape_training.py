@@ -16,13 +16,13 @@ network barely moved from the uniform kernel: held-out loss 0.985–1.0 after 40
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optax
 from scipy.spatial import cKDTree
 
 from dpm.data.dataset import Shard, load_shard, shard_sizes
@@ -36,7 +36,6 @@ from dpm.density.shaped import (
 )
 from dpm.errors import InputError
 from dpm.nn.config import Config
-from dpm.nn.losses import training_loss
 from dpm.nn.shape_net import point_precisions
 
 HISTORY_K = (4, 256)  # history photons in the disc: log-uniform in this range
@@ -61,23 +60,15 @@ def batch_radiance(model, params: dict, b: ShapeBatch) -> jnp.ndarray:
     return jnp.sum(jnp.where(b.valid[..., None], w[..., None] * b.flux, 0.0), axis=1)
 
 
-def make_shape_steps(model, learning_rate: float, loss_name: str, balance: bool):
-    """The optimiser, a jitted loss(params, batch, target, part) and a jitted training step,
-    as dpm.nn.train.make_steps gives for DPM."""
-    optimiser = optax.adam(learning_rate)
+def shape_estimates(model) -> Callable:
+    """estimates(params, batch) -> ((B, 3) radiance under the network's kernel, (B, 3) under
+    the uniform one), for dpm.nn.train.make_steps."""
 
-    def loss(params, batch, target, part=None):
-        estimate = batch_radiance(model, params, batch)
-        flat = jnp.sum(jnp.where(batch.valid[..., None], batch.flux, 0.0), axis=1)
-        return training_loss(estimate, target, loss_name, flat if balance else None, part)
+    def estimates(params: dict, b: ShapeBatch) -> tuple[jnp.ndarray, jnp.ndarray]:
+        flat = jnp.sum(jnp.where(b.valid[..., None], b.flux, 0.0), axis=1)
+        return batch_radiance(model, params, b), flat
 
-    @jax.jit
-    def step(params, opt_state, batch, target, part=None):
-        value, grads = jax.value_and_grad(loss)(params, batch, target, part)
-        updates, opt_state = optimiser.update(grads, opt_state, params)
-        return optax.apply_updates(params, updates), opt_state, value
-
-    return optimiser, jax.jit(loss), step
+    return estimates
 
 
 class ShapeSampler:

@@ -33,28 +33,32 @@ from dpm.nn.losses import training_loss
 from dpm.nn.model import example_input, make_model
 from dpm.nn.run_folder import RunFolder
 from dpm.nn.sampler import Sampler
-from dpm.nn.shape_training import ShapeSampler, make_shape_steps
+from dpm.nn.shape_training import ShapeSampler, shape_estimates
 from dpm.nn.sharding import DataParallel
 from dpm.nn.weights import Weights, save_weights
 
 
 def make_steps(
-    model, learning_rate: float, loss_name: str, balance: bool
+    model, learning_rate: float, loss_name: str, balance: bool, estimates: Callable | None = None
 ) -> tuple[optax.GradientTransformation, Callable, Callable]:
     """The optimiser, a jitted loss(params, batch, target, part) and a jitted training step
     (target: (N, 3) radiance, W/(m² sr); part: the (N,) int32 (scene, budget) pair of each
     point, used when `balance`). The loss is `loss_name` of dpm.nn.losses.LOSSES, divided per
-    part by the uniform kernel's (PM-K's) when `balance`."""
+    part by the uniform kernel's (PM-K's) when `balance`. `estimates(params, batch)` gives
+    the (N, 3) radiance of the network and of the uniform kernel (default: DPM's)."""
     optimiser = optax.adam(learning_rate)
-    predict = jax.vmap(lambda params, b: point_radiance(model, params, b), (None, 0))
-    uniform = jax.vmap(
-        lambda b: kernel_estimate(jnp.ones(b.valid.shape), b.flux, b.valid, b.albedo, b.radius)
-    )
+    if estimates is None:
+        predict = jax.vmap(lambda params, b: point_radiance(model, params, b), (None, 0))
+        flat = jax.vmap(
+            lambda b: kernel_estimate(jnp.ones(b.valid.shape), b.flux, b.valid, b.albedo, b.radius)
+        )
+
+        def estimates(params, batch):
+            return predict(params, batch), flat(batch)
 
     def loss(params, batch, target, part=None):
-        estimate = predict(params, batch)
-        flat = uniform(batch) if balance else None  # once, shared by every named loss
-        return training_loss(estimate, target, loss_name, flat, part)
+        estimate, uniform = estimates(params, batch)
+        return training_loss(estimate, target, loss_name, uniform if balance else None, part)
 
     @jax.jit
     def step(params, opt_state, batch, target, part=None):
@@ -93,8 +97,8 @@ def train(config: Config, progress: bool = True) -> tuple[dict, list[dict]]:
     )  # fmt: skip
     run = RunFolder(config)
     model = make_model(m.architecture, m.width)
-    steps = make_shape_steps if nppm else make_steps
-    optimiser, loss, step = steps(model, t.learning_rate, t.loss, t.balance)
+    estimates = shape_estimates(model) if nppm else None
+    optimiser, loss, step = make_steps(model, t.learning_rate, t.loss, t.balance, estimates)
     params = devices.replicate(init_params(model, m.k, t.seed, m.architecture))
     done, params, opt_state, rows = run.restore(params, devices.replicate(optimiser.init(params)))
     if not rows:  # step 0: the fresh network (the uniform kernel: PM-K for DPM, PPM for nppm)
