@@ -143,4 +143,4 @@ def test_the_benchmarks_compare_every_method_with_an_estimator_of_its_own() -> N
     # hybrid reuses dpm's estimator, sppm renders per pixel and pt has no caustic estimate
     from common import photon_methods
 
-    assert list(photon_methods()) == ["pm", "ppm", "appm", "cppm", "dpm"]
+    assert list(photon_methods()) == ["pm", "ppm", "appm", "cppm", "dpm", "nppm"]
