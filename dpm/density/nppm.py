@@ -31,6 +31,7 @@ from dpm.density.progressive import ALPHA
 from dpm.density.shaped import (
     MOMENTS,
     features,
+    normaliser,
     pair_moments,
     principal_axes,
     relative_weight,
@@ -115,7 +116,8 @@ class NPPMState(PPMState):
             sel = np.flatnonzero(self.moments[point, 0] > 0)
             q = point[sel]
             uv = to_axes(ab[sel], cos[q], sin[q])
-            weight[sel] = relative_weight(uv[:, 0], uv[:, 1], p[q, 0], p[q, 1])
+            z = normaliser(p[:, 0], p[:, 1])  # once per point, not per photon
+            weight[sel] = relative_weight(uv[:, 0], uv[:, 1], p[q, 0], p[q, 1], z=z[q])
         return weight
 
 

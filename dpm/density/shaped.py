@@ -50,10 +50,12 @@ def normaliser(p1: Any, p2: Any, xp: Any = np) -> Any:
     return 2.0 * np.pi * xp.mean(g, axis=-1)
 
 
-def relative_weight(a: Any, b: Any, p1: Any, p2: Any, xp: Any = np) -> Any:
+def relative_weight(a: Any, b: Any, p1: Any, p2: Any, xp: Any = np, z: Any = None) -> Any:
     """(…) kernel weight relative to the uniform disc of photons at (a, b) (units of R, along
-    e₁, e₂) under precisions p₁, p₂ (…): 1 everywhere when p₁ = p₂ = 0."""
-    return np.pi * xp.exp(-0.5 * (p1 * a * a + p2 * b * b)) / normaliser(p1, p2, xp)
+    e₁, e₂) under precisions p₁, p₂ (…): 1 everywhere when p₁ = p₂ = 0. `z`: their
+    `normaliser`, when the caller has it per point rather than per photon."""
+    z = normaliser(p1, p2, xp) if z is None else z
+    return np.pi * xp.exp(-0.5 * (p1 * a * a + p2 * b * b)) / z
 
 
 def pair_moments(point: np.ndarray, n: int, ab: np.ndarray, direction_ab: np.ndarray) -> np.ndarray:
