@@ -46,7 +46,7 @@ def main() -> None:
             result = render(scene, options, started=time.monotonic())
             s = result.stats["seconds"]
             caustic = sum(s.get(k, 0.0) for k in ("photons", "gather", "estimate"))
-            path = s.get("visible_points", 0.0) + s.get("shade", 0.0)
+            path = s.get("visible_points", 0.0) + s.get("shade", 0.0) + s.get("path", 0.0)
             print(
                 f"{name} photons/pixel {ppp:g} footprints {footprints:g}: "
                 f"{result.stats['passes']} passes, RMSE {rmse(result.image, ref):.4f}, "

@@ -112,7 +112,7 @@ STAGES = {  # the summary's stages: name -> the render's timing keys
     "gather": ("gather",),
     "estimate": ("estimate",),
     "network": ("network",),
-    "path tracing": ("visible_points", "shade"),
+    "path tracing": ("visible_points", "shade", "path"),
     "denoise": ("denoise",),
     "write": ("write",),
 }

@@ -4,7 +4,9 @@ One path for every method (`dpm.methods.METHODS`): trace the camera's visible po
 diffuse hits of the pixel samples) block by block, shade them with the path tracer (without
 caustics unless the method is `pt`), and add the method's caustic radiance at the points (or
 its per-pixel caustic image); `--component caustic` keeps only the caustics as the camera sees
-them. Any method can be denoised (the hybrid is by default).
+them. A method that needs no visible points (pt, pt-nocaustic, sppm's per-pixel caustics)
+traces and shades whole pixels in one kernel (`trace_pixels`, the same samples). Any method
+can be denoised (the hybrid is by default).
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from dpm.tracer import (
     build_bvh,
     intersect,
     shade,
+    trace_pixels,
     trace_visible_points,
 )
 
@@ -111,9 +114,12 @@ def render(
     full = options.component == "full"
     # The progressive methods keep statistics for every visible point at once.
     rows_per_step = h if cls.all_points else max(1, SAMPLES_PER_STEP // (w * spp))
-    watch.add("visible_points", 0.0)
-    if full:
-        watch.add("shade", 0.0)
+    if cls.at_points:
+        watch.add("visible_points", 0.0)
+        if full:
+            watch.add("shade", 0.0)
+    elif full:
+        watch.add("path", 0.0)
     hits = dropped = 0
     cs = options.caustic_samples
     blocks = full or cls.at_points
@@ -121,6 +127,17 @@ def render(
     with tqdm(total=h, unit="row", disable=not show, desc=options.method) as bar:
         for row0 in range(0, h if blocks else 0, rows_per_step):
             row1 = min(h, row0 + rows_per_step)
+            if not cls.at_points:  # path tracing alone: whole pixels in one pass, no arrays
+                with watch("path"):
+                    part, a, n, found, bad = trace_pixels(
+                        scene, bvh, camera, spp, options.seed, (row0, row1), cls.path_caustics
+                    )
+                image[row0:row1] += part
+                if denoised:
+                    albedo[row0:row1], normal[row0:row1] = a, n
+                hits, dropped = hits + found, dropped + bad
+                bar.update(row1 - row0)
+                continue
             with watch("visible_points"):
                 points = trace_visible_points(scene, bvh, camera, spp, options.seed, (row0, row1))
             radiance = np.zeros((len(points), 3), np.float32)

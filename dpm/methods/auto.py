@@ -34,7 +34,14 @@ from dpm.methods.sppm import sppm_gather
 from dpm.options import RenderOptions
 from dpm.scene import DIFFUSE, Scene
 from dpm.stopwatch import Stopwatch
-from dpm.tracer import BVH, VisiblePoints, shade, trace_photons, trace_visible_points
+from dpm.tracer import (
+    BVH,
+    VisiblePoints,
+    shade,
+    trace_photons,
+    trace_pixels,
+    trace_visible_points,
+)
 
 RADIUS_FOOTPRINTS = 2.0  # initial radius per pixel, in pixel footprints at its first point
 PHOTONS_PER_PIXEL = 4.0  # photon paths per pass per pixel when the plan keeps caustics (tuned:
@@ -152,25 +159,34 @@ class Auto(Method):
         begun = time.monotonic()
         while True:
             seed = pass_seed(o.seed, j)
-            with watch("visible_points"):
-                points = trace_visible_points(scene, bvh, camera, 1, seed, (0, h))
-            if j == 0 and o.radius is None:
-                state.radius = footprint_radius(points, camera)
-            if full:
-                with watch("shade"):
-                    reflected, bad = shade(scene, bvh, points, seed, caustics=False)
-                    path_sum += points.emitted + points.throughput * reflected
+            if full and plan is not None and plan.caustics == "off":
+                # no caustic estimate: whole pixels in one kernel, no visible points kept
+                with watch("path"):
+                    part, a, n, _, bad = trace_pixels(scene, bvh, camera, 1, seed, (0, h), False)
+                path_sum += part.reshape(pixels, 3)
+                albedo += a.reshape(pixels, 3)
+                normal += n.reshape(pixels, 3)
                 dropped += bad
-                a, n = guides(points)
-                albedo += a
-                normal += n
-            n_paths = first_photons if plan is None else plan.photons_per_pass
-            if n_paths and (plan is None or plan.caustics != "off"):
-                with watch("photons"):
-                    photons = trace_photons(
-                        scene, bvh, n_paths, o.seed, caustic_only=True, first_path=state.paths
-                    )
-                sppm_gather(state, points, photons, watch)
+            else:
+                with watch("visible_points"):
+                    points = trace_visible_points(scene, bvh, camera, 1, seed, (0, h))
+                if j == 0 and o.radius is None:
+                    state.radius = footprint_radius(points, camera)
+                if full:
+                    with watch("shade"):
+                        reflected, bad = shade(scene, bvh, points, seed, caustics=False)
+                        path_sum += points.emitted + points.throughput * reflected
+                    dropped += bad
+                    a, n = guides(points)
+                    albedo += a
+                    normal += n
+                n_paths = first_photons if plan is None else plan.photons_per_pass
+                if n_paths and (plan is None or plan.caustics != "off"):
+                    with watch("photons"):
+                        photons = trace_photons(
+                            scene, bvh, n_paths, o.seed, caustic_only=True, first_path=state.paths
+                        )
+                    sppm_gather(state, points, photons, watch)
             if plan is None:
                 path_light = float(path_sum.mean(axis=1).sum()) if full else 0.0
                 caustic_light = float(state.irradiance().mean(axis=1).sum())

@@ -13,6 +13,7 @@ import math
 import numba as nb
 import numpy as np
 
+from dpm.camera import Camera
 from dpm.scene import DIFFUSE, Scene
 from dpm.tracer.bsdf import scatter_specular, specular_survival
 from dpm.tracer.bvh import BVH
@@ -20,7 +21,7 @@ from dpm.tracer.lights import light_pdf_solid_angle, sample_light_point
 from dpm.tracer.sampling import sample_cosine, uniform
 from dpm.tracer.surface import next_surface
 from dpm.tracer.traverse import any_hit, new_stack, spawn_offset
-from dpm.tracer.visible import RR_SPECULAR, SHADE_DIM0, VisiblePoints
+from dpm.tracer.visible import RR_SPECULAR, SHADE_DIM0, VisiblePoints, camera_sample
 
 MAX_VERTICES = 256  # path vertices after the visible point; Russian roulette ends most sooner
 RR_START = 3  # vertices before Russian roulette may end a path
@@ -58,6 +59,14 @@ def _unoccluded(bvh, ax, ay, az, bx, by, bz, stack):
 @nb.njit(cache=True, _nrt=False, error_model="numpy")
 def shade_one(bvh, sc, seed, stream, eps, caustics, stack, px, py, pz, nx, ny, nz, ar, ag, ab):
     """RGB radiance reflected by the diffuse point p (normal n towards the viewer, albedo a)."""
+    return shade_path(
+        bvh, sc, seed, stream, eps, caustics, stack, px, py, pz, nx, ny, nz, ar, ag, ab
+    )
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def shade_path(bvh, sc, seed, stream, eps, caustics, stack, px, py, pz, nx, ny, nz, ar, ag, ab):
+    """`shade_one`, inlined where its callers are compiled."""
     inv_pi = 1.0 / math.pi
     lr = lg = lb = 0.0
     br, bg, bb = ar, ag, ab  # path weight including the BSDF·cos/pdf of the current vertex
@@ -181,3 +190,88 @@ def shade(
         points.albedo, points.hit, points.sample, seed, spawn_offset(scene), caustics, out,
     )  # fmt: skip
     return out, int(bad)
+
+
+@nb.njit(cache=True, _nrt=False, error_model="numpy")
+def path_pixel(bvh, sc, cam, width, height, pix, spp, seed, eps, caustics, stack):
+    """Sums over the spp camera paths of pixel pix (row-major index): (radiance r, g, b,
+    denoiser albedo r, g, b and normal x, y, z, visible points found, non-finite samples)."""
+    y, x = pix // width, pix % width
+    sr = sg = sb = gr = gg = gb = hx = hy = hz = 0.0
+    hits = bad = 0
+    for s in range(spp):
+        stream = pix * spp + s
+        v = camera_sample(bvh, sc, cam, width, height, x, y, stream, seed, eps, stack)
+        er, eg, eb = v[13], v[14], v[15]
+        sr, sg, sb = sr + er, sg + eg, sb + eb
+        if v[0]:
+            hits += 1
+            r, g, b = shade_path(
+                bvh, sc, seed, stream, eps, caustics, stack,
+                v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], v[9],
+            )  # fmt: skip
+            if math.isfinite(r) and math.isfinite(g) and math.isfinite(b):
+                sr, sg, sb = sr + v[10] * r, sg + v[11] * g, sb + v[12] * b
+            else:  # as `shade`: the sample's reflected light counts as zero
+                bad += 1
+            gr += min(max(v[7] * v[10], 0.0), 1.0)
+            gg += min(max(v[8] * v[11], 0.0), 1.0)
+            gb += min(max(v[9] * v[12], 0.0), 1.0)
+            hx, hy, hz = hx + v[4], hy + v[5], hz + v[6]
+        else:
+            peak = max(er, eg, eb)
+            if peak > 0:  # a light seen directly: its normalised colour
+                gr, gg, gb = gr + er / peak, gg + eg / peak, gb + eb / peak
+    return sr, sg, sb, gr, gg, gb, hx, hy, hz, hits, bad
+
+
+@nb.njit(cache=True, parallel=True, error_model="numpy")
+def pixels_kernel(
+    bvh, depth, sc, cam, width, height, row0, row1, spp, seed, eps, caustics,
+    image, albedo, normal,
+):  # fmt: skip
+    """Per pixel of image rows row0..row1-1 (row-major, (P, 3) outputs): the mean radiance of
+    spp camera paths and the mean denoiser guides (`dpm.denoise.guides`); returns (visible
+    points found, non-finite samples dropped)."""
+    n = (row1 - row0) * width
+    per_task = max(1, SAMPLES_PER_TASK // spp)
+    n_tasks = (n + per_task - 1) // per_task
+    hits = np.zeros(n_tasks, np.int64)
+    bad = np.zeros(n_tasks, np.int64)
+    for task in nb.prange(n_tasks):
+        stack = new_stack(depth)
+        for p in range(task * per_task, min(n, (task + 1) * per_task)):
+            v = path_pixel(
+                bvh, sc, cam, width, height, row0 * width + p, spp, seed, eps, caustics, stack
+            )
+            image[p, 0], image[p, 1], image[p, 2] = v[0] / spp, v[1] / spp, v[2] / spp
+            albedo[p, 0], albedo[p, 1], albedo[p, 2] = v[3] / spp, v[4] / spp, v[5] / spp
+            normal[p, 0], normal[p, 1], normal[p, 2] = v[6] / spp, v[7] / spp, v[8] / spp
+            hits[task] += v[9]
+            bad[task] += v[10]
+    return hits.sum(), bad.sum()
+
+
+def trace_pixels(
+    scene: Scene,
+    bvh: BVH,
+    camera: Camera,
+    spp: int,
+    seed: int,
+    rows: tuple[int, int],
+    caustics: bool = True,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
+    """Path tracing of whole pixels, image rows rows[0]..rows[1]-1: (rows, W, 3) float32 mean
+    radiance, mean denoiser albedo and normal, visible points found and non-finite samples
+    dropped. The same samples (random streams) as `trace_visible_points` then `shade`, in one
+    pass that keeps no per-sample arrays; it equals them within float rounding."""
+    row0, row1 = rows
+    shape = (row1 - row0, camera.width, 3)
+    image, albedo, normal = (np.empty((shape[0] * shape[1], 3)) for _ in range(3))
+    hits, bad = pixels_kernel(
+        bvh.arrays, bvh.depth, scene.kernel_arrays(), camera.basis(), camera.width,
+        camera.height, row0, row1, spp, seed, spawn_offset(scene), caustics,
+        image, albedo, normal,
+    )  # fmt: skip
+    out = tuple(a.astype(np.float32).reshape(shape) for a in (image, albedo, normal))
+    return (*out, int(hits), int(bad))

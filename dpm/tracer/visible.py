@@ -54,6 +54,75 @@ class VisiblePoints:
         return VisiblePoints(*(getattr(self, f.name)[mask] for f in fields(self)))
 
 
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def camera_sample(bvh, sc, cam, width, height, x, y, stream, seed, eps, stack):
+    """(hit, point x, y, z, normal x, y, z, albedo r, g, b, throughput r, g, b, emitted r, g,
+    b) of sample `stream` of pixel (x, y): its camera ray followed through specular vertices
+    to the first diffuse surface. A miss has zero point, normal, albedo and throughput."""
+    fx = 2.0 * (x + uniform(seed, stream, 0)) / width - 1.0
+    fy = 1.0 - 2.0 * (y + uniform(seed, stream, 1)) / height
+    dx = cam[1, 0] + fx * cam[2, 0] + fy * cam[3, 0]
+    dy = cam[1, 1] + fx * cam[2, 1] + fy * cam[3, 1]
+    dz = cam[1, 2] + fx * cam[2, 2] + fy * cam[3, 2]
+    inv_len = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
+    dx, dy, dz = dx * inv_len, dy * inv_len, dz * inv_len
+    ox, oy, oz = cam[0, 0], cam[0, 1], cam[0, 2]
+    tr = tg = tb = 1.0
+    er = eg = eb = 0.0
+    for vertex in range(MAX_SPECULAR_DEPTH + 1):
+        tri, _, px, py, pz, nx, ny, nz, m, cos_i, front = next_surface(
+            bvh, sc, ox, oy, oz, dx, dy, dz, stack
+        )
+        if tri < 0:
+            break
+        if front:  # emitters radiate from the front face only
+            er += tr * sc.emission[m, 0]
+            eg += tg * sc.emission[m, 1]
+            eb += tb * sc.emission[m, 2]
+        if sc.kind[m] == DIFFUSE:
+            a = sc.albedo[m]
+            return (
+                True, px, py, pz, nx, ny, nz, np.float64(a[0]), np.float64(a[1]),
+                np.float64(a[2]), tr, tg, tb, er, eg, eb,
+            )  # fmt: skip
+        if vertex == MAX_SPECULAR_DEPTH:
+            break
+        if vertex >= RR_SPECULAR:
+            q = specular_survival(sc, m, front, max(tr, tg, tb), 1.0, True)
+            if uniform(seed, stream, 3 + 2 * vertex) >= q:
+                break
+            tr, tg, tb = tr / q, tg / q, tb / q
+        u = uniform(seed, stream, 2 + 2 * vertex)
+        dx, dy, dz, wr, wg, wb, side = scatter_specular(
+            sc, m, dx, dy, dz, nx, ny, nz, cos_i, front, u, True
+        )
+        tr, tg, tb = tr * wr, tg * wg, tb * wb
+        ox, oy, oz = px + side * eps * nx, py + side * eps * ny, pz + side * eps * nz
+    z = 0.0
+    return False, z, z, z, z, z, z, z, z, z, z, z, z, er, eg, eb
+
+
+# Compiled without Numba's reference counting, as `dpm.tracer.path.shade_one` (see there).
+@nb.njit(cache=True, _nrt=False, error_model="numpy")
+def visible_pixel(
+    bvh, sc, cam, width, height, pix, row, spp, seed, eps, stack,
+    position, normal, albedo, throughput, emitted, hit, pixel, sample,
+):  # fmt: skip
+    """Fill output rows row..row+spp-1 with the samples of pixel pix (row-major index)."""
+    y, x = pix // width, pix % width
+    for s in range(spp):
+        i = row + s
+        stream = pix * spp + s
+        pixel[i], sample[i] = pix, stream
+        v = camera_sample(bvh, sc, cam, width, height, x, y, stream, seed, eps, stack)
+        hit[i] = v[0]
+        position[i, 0], position[i, 1], position[i, 2] = v[1], v[2], v[3]
+        normal[i, 0], normal[i, 1], normal[i, 2] = v[4], v[5], v[6]
+        albedo[i, 0], albedo[i, 1], albedo[i, 2] = v[7], v[8], v[9]
+        throughput[i, 0], throughput[i, 1], throughput[i, 2] = v[10], v[11], v[12]
+        emitted[i, 0], emitted[i, 1], emitted[i, 2] = v[13], v[14], v[15]
+
+
 @nb.njit(cache=True, parallel=True, error_model="numpy")
 def visible_points_kernel(
     bvh, depth, sc, cam, width, height, row0, row1, spp, seed, eps,
@@ -61,60 +130,10 @@ def visible_points_kernel(
 ):  # fmt: skip
     """Fill the output arrays (one row per sample of image rows row0..row1-1)."""
     for p in nb.prange((row1 - row0) * width):
-        stack = new_stack(depth)
-        pix = row0 * width + p
-        y, x = pix // width, pix % width
-        for s in range(spp):
-            i = p * spp + s
-            stream = pix * spp + s
-            pixel[i], sample[i] = pix, stream
-            fx = 2.0 * (x + uniform(seed, stream, 0)) / width - 1.0
-            fy = 1.0 - 2.0 * (y + uniform(seed, stream, 1)) / height
-            dx = cam[1, 0] + fx * cam[2, 0] + fy * cam[3, 0]
-            dy = cam[1, 1] + fx * cam[2, 1] + fy * cam[3, 1]
-            dz = cam[1, 2] + fx * cam[2, 2] + fy * cam[3, 2]
-            inv_len = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
-            dx, dy, dz = dx * inv_len, dy * inv_len, dz * inv_len
-            ox, oy, oz = cam[0, 0], cam[0, 1], cam[0, 2]
-            tr = tg = tb = 1.0
-            er = eg = eb = 0.0
-            hit[i] = False
-            for vertex in range(MAX_SPECULAR_DEPTH + 1):
-                tri, _, px, py, pz, nx, ny, nz, m, cos_i, front = next_surface(
-                    bvh, sc, ox, oy, oz, dx, dy, dz, stack
-                )
-                if tri < 0:
-                    break
-                if front:  # emitters radiate from the front face only
-                    er += tr * sc.emission[m, 0]
-                    eg += tg * sc.emission[m, 1]
-                    eb += tb * sc.emission[m, 2]
-                if sc.kind[m] == DIFFUSE:
-                    position[i, 0], position[i, 1], position[i, 2] = px, py, pz
-                    normal[i, 0], normal[i, 1], normal[i, 2] = nx, ny, nz
-                    albedo[i, 0], albedo[i, 1], albedo[i, 2] = sc.albedo[m]
-                    throughput[i, 0], throughput[i, 1], throughput[i, 2] = tr, tg, tb
-                    hit[i] = True
-                    break
-                if vertex == MAX_SPECULAR_DEPTH:
-                    break
-                if vertex >= RR_SPECULAR:
-                    q = specular_survival(sc, m, front, max(tr, tg, tb), 1.0, True)
-                    if uniform(seed, stream, 3 + 2 * vertex) >= q:
-                        break
-                    tr, tg, tb = tr / q, tg / q, tb / q
-                u = uniform(seed, stream, 2 + 2 * vertex)
-                dx, dy, dz, wr, wg, wb, side = scatter_specular(
-                    sc, m, dx, dy, dz, nx, ny, nz, cos_i, front, u, True
-                )
-                tr, tg, tb = tr * wr, tg * wg, tb * wb
-                ox, oy, oz = px + side * eps * nx, py + side * eps * ny, pz + side * eps * nz
-            if not hit[i]:
-                position[i] = 0.0
-                normal[i] = 0.0
-                albedo[i] = 0.0
-                throughput[i] = 0.0
-            emitted[i, 0], emitted[i, 1], emitted[i, 2] = er, eg, eb
+        visible_pixel(
+            bvh, sc, cam, width, height, row0 * width + p, p * spp, spp, seed, eps,
+            new_stack(depth), position, normal, albedo, throughput, emitted, hit, pixel, sample,
+        )  # fmt: skip
 
 
 def trace_visible_points(
