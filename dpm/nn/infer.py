@@ -7,7 +7,9 @@ photon map's arrays once and each chunk of points as indices of their neighbours
 so gathering the (B, K, 3) photon arrays happens inside the jitted function;
 `predict_points` runs it over a whole set of points in chunks sized to stay in the caches.
 The KernelNet is evaluated as flat matmuls over all the chunk's photons (`kernel_radiance`),
-with XLA's YNNPACK matmuls; it equals the per-point Flax `apply` within float rounding.
+with XLA's YNNPACK matmuls; rendering also folds the input features into the first layer and
+reads each photon as one packed row (`query_radiance`). Both equal the per-point Flax `apply`
+within float rounding (tested).
 """
 
 from __future__ import annotations
@@ -22,7 +24,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from dpm.density.gather import NORMAL_COS, PhotonIndex, photon_index, take
-from dpm.nn.features import MIN_RADIUS, canonical_angle, features, kernel_estimate
+from dpm.nn.features import (
+    MIN_RADIUS,
+    canonical_angle,
+    features,
+    flux_map,
+    kernel_estimate,
+    local_frame,
+)
 from dpm.nn.model import SHIFT, KernelNet
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap
@@ -76,34 +85,49 @@ def _dense(layer: dict, x: jnp.ndarray) -> jnp.ndarray:
 
 def kernel_radiance(params: dict, b: Batch) -> jnp.ndarray:
     """(B, 3) radiance of B points by KernelNet's params: `point_radiance` rewritten as flat
-    matmuls over the B·K photon rows, for speed (equal within float rounding, tested).
-
-    The predictor's first layer takes [photon feature, context]; its context half is applied
-    once per point, not once per photon, which saves a third of the network's arithmetic.
-    """
+    matmuls over the B·K photon rows, for speed (equal within float rounding, tested)."""
     p = params["params"]
     n, k = b.valid.shape
     canonical = jax.vmap(canonical_angle)(b.offset, b.valid, b.normal)
     angle = jnp.where(jnp.isnan(b.angle), canonical, b.angle)
     x = jax.vmap(features)(b.offset, b.direction, b.flux, b.normal, b.radius, b.n_paths, angle)
-    h = x.reshape(n * k, x.shape[-1])
-    for name in ("Dense_0", "Dense_1", "Dense_2"):
+    h = jax.nn.relu(_dense(p["Extractor_0"]["Dense_0"], x.reshape(n * k, x.shape[-1])))
+    return kernel_head(p, h, b.valid, b.flux, b.albedo, b.radius)
+
+
+def kernel_head(
+    p: dict,
+    h: jnp.ndarray,
+    valid: jnp.ndarray,
+    flux: jnp.ndarray,
+    albedo: jnp.ndarray,
+    radius: jnp.ndarray,
+) -> jnp.ndarray:
+    """(B, 3) radiance from the extractor's first-layer activations h (B·K, width) of B
+    points' K photons (valid (B, K), stored flux (B, K, 3), albedo (B, 3), bandwidth (B,)):
+    the rest of KernelNet as flat matmuls, then Eq. 2.
+
+    The predictor's first layer takes [photon feature, context]; its context half is applied
+    once per point, not once per photon, which saves a third of the network's arithmetic.
+    """
+    n, k = valid.shape
+    for name in ("Dense_1", "Dense_2"):
         h = jax.nn.relu(_dense(p["Extractor_0"][name], h))
     width = h.shape[-1]
     h3 = h.reshape(n, k, width)
     # ReLU features are ≥ 0, so zeroing the invalid photons leaves the max over the valid
     # ones (and 0 when none is valid, as the Extractor does), with one masked array
-    masked = h3 * b.valid[:, :, None]
+    masked = h3 * valid[:, :, None]
     biggest = jnp.max(masked, axis=1)
-    mean = jnp.sum(masked, axis=1) / jnp.maximum(b.valid.sum(1), 1)[:, None]
+    mean = jnp.sum(masked, axis=1) / jnp.maximum(valid.sum(1), 1)[:, None]
     first = p["Dense_0"]
     own, shared = first["kernel"][:width], first["kernel"][width:]
     context = jnp.concatenate([biggest, mean], axis=-1) @ shared + first["bias"]  # (B, width)
     z = jax.nn.relu((h @ own).reshape(n, k, width) + context[:, None, :])
     z = jax.nn.relu(_dense(p["Dense_1"], z.reshape(n * k, width)))
     z = _dense(p["Dense_2"], z).reshape(n, k)
-    weight = jnp.where(b.valid, jax.nn.softplus(z + SHIFT), 0.0)
-    return jax.vmap(kernel_estimate)(weight, b.flux, b.valid, b.albedo, b.radius)
+    weight = jnp.where(valid, jax.nn.softplus(z + SHIFT), 0.0)
+    return jax.vmap(kernel_estimate)(weight, flux, valid, albedo, radius)
 
 
 def batch_radiance(model: nn.Module) -> Callable[[dict, Batch], jnp.ndarray]:
@@ -119,12 +143,27 @@ def make_predict(model: nn.Module) -> Callable[[dict, Batch], jnp.ndarray]:
 
 
 class PhotonTable(NamedTuple):
-    """A photon map's arrays as the network reads them (float32, scene units and W ÷ N)."""
+    """A photon map's arrays as the network reads them: one gather per photon reads a row."""
 
-    position: jnp.ndarray  # (P, 3)
-    direction: jnp.ndarray  # (P, 3) unit, towards the photon's source
-    flux: jnp.ndarray  # (P, 3)
-    normal: jnp.ndarray  # (P, 3) unit geometric normal on the side the photon arrived
+    rows: jnp.ndarray  # (P + 1, 16) float32: position (3), unit direction towards the source
+    # (3), stored flux (3, W ÷ N), unit normal (3), the flux feature flux_map(flux · N) (3), 0;
+    # row P is zeros (a missing neighbour: its zero normal never agrees)
+
+
+POSITION, DIRECTION, FLUX, NORMAL, FLUX_FEATURE = (slice(i, i + 3) for i in range(0, 15, 3))
+
+
+def photon_table(photons: PhotonMap) -> PhotonTable:
+    """The PhotonTable of a photon map (float32, scene units and W ÷ N)."""
+    rows = np.zeros((len(photons.position) + 1, 16), np.float32)
+    for columns, values in zip(
+        (POSITION, DIRECTION, FLUX, NORMAL),
+        (photons.position, photons.direction, photons.flux, photons.normal),
+        strict=True,
+    ):
+        rows[:-1, columns] = values
+    rows[:-1, FLUX_FEATURE] = flux_map(jnp.asarray(photons.flux * photons.n_paths, jnp.float32))
+    return PhotonTable(jnp.asarray(rows))
 
 
 class Query(NamedTuple):
@@ -147,18 +186,47 @@ def gathered_batch(table: PhotonTable, q: Query) -> Batch:
     Offsets are (photon − hi) − lo in float32: the first difference is exact for nearby
     points (Sterbenz), so the offset keeps the float64 point position's accuracy.
     """
-    missing = (q.index >= table.position.shape[0])[:, :, None]
-
-    def take(values: jnp.ndarray) -> jnp.ndarray:
-        return jnp.take(values, q.index, axis=0, mode="fill", fill_value=0.0)
-
-    offset = (take(table.position) - q.position_hi[:, None]) - q.position_lo[:, None]
+    photon = table.rows[q.index]  # (B, K, 16); index P reads the zero row
+    missing = (q.index >= table.rows.shape[0] - 1)[:, :, None]
+    offset = (photon[..., POSITION] - q.position_hi[:, None]) - q.position_lo[:, None]
     # as `PhotonIndex.nearest` checks them; a missing photon's zero normal never agrees
-    valid = jnp.sum(take(table.normal) * q.normal[:, None], axis=-1) >= NORMAL_COS
+    valid = jnp.sum(photon[..., NORMAL] * q.normal[:, None], axis=-1) >= NORMAL_COS
     return Batch(
-        jnp.where(missing, 0.0, offset), take(table.direction), take(table.flux), valid,
+        jnp.where(missing, 0.0, offset), photon[..., DIRECTION], photon[..., FLUX], valid,
         q.normal, q.albedo, q.radius, q.angle, q.n_paths,
     )  # fmt: skip
+
+
+def query_radiance(params: dict, table: PhotonTable, q: Query) -> jnp.ndarray:
+    """(B, 3) radiance of q's B points by KernelNet's params: `kernel_radiance` of their
+    `gathered_batch` with the input features folded into the first layer (equal within
+    float rounding, tested), for speed.
+
+    The first layer is linear in the features: a point's frame rotation and 1/r act on its
+    photons' offsets and directions through per-point (6, width) weights, so no (B, K, 9)
+    feature array is formed; the flux feature comes precomputed with the photon's row.
+    """
+    p = params["params"]
+    n, k = q.index.shape
+    photon = table.rows[q.index]  # (B, K, 16)
+    missing = (q.index >= table.rows.shape[0] - 1)[:, :, None]
+    offset = (photon[..., POSITION] - q.position_hi[:, None]) - q.position_lo[:, None]
+    offset = jnp.where(missing, 0.0, offset)
+    valid = jnp.sum(photon[..., NORMAL] * q.normal[:, None], axis=-1) >= NORMAL_COS
+    canonical = jax.vmap(canonical_angle)(offset, valid, q.normal)
+    angle = jnp.where(jnp.isnan(q.angle), canonical, q.angle)
+    frame = jax.vmap(local_frame)(q.normal, angle)  # (B, 3, 3): tangent rows, then normal
+    first = p["Extractor_0"]["Dense_0"]
+    kernel = first["kernel"]  # rows: position (3), direction (3), flux feature (3)
+    inv_r = 1.0 / jnp.maximum(q.radius, MIN_RADIUS)
+    to_position = jnp.einsum("bij,iw->bjw", frame, kernel[0:3]) * inv_r[:, None, None]
+    to_direction = jnp.einsum("bij,iw->bjw", frame, kernel[3:6])
+    per_point = jnp.concatenate([to_position, to_direction], axis=1)  # (B, 6, width)
+    x = jnp.concatenate([offset, photon[..., DIRECTION]], axis=-1)  # (B, K, 6)
+    flux = photon[..., FLUX_FEATURE].reshape(n * k, 3) @ kernel[6:9] + first["bias"]
+    h = jnp.einsum("bkc,bcw->bkw", x, per_point) + flux.reshape(n, k, -1)
+    h = jax.nn.relu(h).reshape(n * k, -1)
+    return kernel_head(p, h, valid, photon[..., FLUX], q.albedo, q.radius)
 
 
 def make_query_predict(
@@ -167,10 +235,16 @@ def make_query_predict(
     """A jitted pure function (params, PhotonTable, Query of (S, B) points) -> (S, B, 3)
     radiance: S steps of B points each, run one after another inside the function (one call
     per block of points, each step's activations sized to stay in the caches)."""
-    radiance = batch_radiance(model)
+    if isinstance(model, KernelNet):
+        radiance = query_radiance
+    else:
+        batched = batch_radiance(model)
+
+        def radiance(params: dict, table: PhotonTable, q: Query) -> jnp.ndarray:
+            return batched(params, gathered_batch(table, q))
 
     def steps(params: dict, table: PhotonTable, q: Query) -> jnp.ndarray:
-        return jax.lax.map(lambda part: radiance(params, gathered_batch(table, part)), q)
+        return jax.lax.map(lambda part: radiance(params, table, part), q)
 
     return jax.jit(steps, compiler_options=fast_dots())
 
@@ -243,8 +317,7 @@ def predict_points(
     the "gather" stage also holds the network's time that the gather could not hide."""
     index = photon_index(photons, watch)
     p = index.photons
-    arrays = (p.position, p.direction, p.flux, p.normal)
-    table = PhotonTable(*(jnp.asarray(a, jnp.float32) for a in arrays))
+    table = photon_table(p)
     out = np.zeros((len(position), 3), np.float32)
     size = chunk_size(k)
     pending = []
