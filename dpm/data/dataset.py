@@ -244,3 +244,30 @@ def load_shard(out: Path, entry: dict, budgets: tuple[int, ...]) -> Shard:
     except Exception as e:  # OSError, KeyError, BadZipFile, zlib.error, ValueError alike
         raise InputError(f"{path}: unreadable training shard ({type(e).__name__})") from None
     return Shard(*points, photons)
+
+
+class ShardCache:
+    """Shards of a training set read on demand, and one object per (shard, budget) built from
+    them (a photon tree), kept with the shard; bounded memory: beyond `size` shards the oldest
+    read is forgotten with its objects."""
+
+    def __init__(self, out: Path, entries: list[dict], budgets: tuple[int, ...], size: int) -> None:
+        self.out, self.entries, self.budgets, self.size = out, entries, budgets, size
+        self.shards: dict[int, Shard] = {}
+        self.built: dict[tuple[int, int], object] = {}
+
+    def shard(self, i: int) -> Shard:
+        """Shard number i of `entries`."""
+        if i not in self.shards:
+            if len(self.shards) >= self.size:
+                oldest = next(iter(self.shards))
+                del self.shards[oldest]
+                self.built = {k: v for k, v in self.built.items() if k[0] != oldest}
+            self.shards[i] = load_shard(self.out, self.entries[i], self.budgets)
+        return self.shards[i]
+
+    def per_map(self, i: int, budget: int, build: Callable) -> object:
+        """build(photon map) of shard i's map of `budget` paths, built once while it is kept."""
+        if (i, budget) not in self.built:
+            self.built[i, budget] = build(self.shard(i).photons[budget])
+        return self.built[i, budget]

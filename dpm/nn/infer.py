@@ -186,15 +186,22 @@ def gathered_batch(table: PhotonTable, q: Query) -> Batch:
     Offsets are (photon − hi) − lo in float32: the first difference is exact for nearby
     points (Sterbenz), so the offset keeps the float64 point position's accuracy.
     """
-    photon = table.rows[q.index]  # (B, K, 16); index P reads the zero row
+    photon, offset, valid = read_photons(table, q)
+    return Batch(
+        offset, photon[..., DIRECTION], photon[..., FLUX], valid,
+        q.normal, q.albedo, q.radius, q.angle, q.n_paths,
+    )  # fmt: skip
+
+
+def read_photons(table: PhotonTable, q: Query) -> tuple[jnp.ndarray, ...]:
+    """q's photons: their rows (B, K, 16), offsets from the points (B, K, 3; zero for a
+    missing neighbour) and validity (B, K): the normal agrees with the point's."""
+    photon = table.rows[q.index]  # index P reads the zero row
     missing = (q.index >= table.rows.shape[0] - 1)[:, :, None]
     offset = (photon[..., POSITION] - q.position_hi[:, None]) - q.position_lo[:, None]
     # as `PhotonIndex.nearest` checks them; a missing photon's zero normal never agrees
     valid = jnp.sum(photon[..., NORMAL] * q.normal[:, None], axis=-1) >= NORMAL_COS
-    return Batch(
-        jnp.where(missing, 0.0, offset), photon[..., DIRECTION], photon[..., FLUX], valid,
-        q.normal, q.albedo, q.radius, q.angle, q.n_paths,
-    )  # fmt: skip
+    return photon, jnp.where(missing, 0.0, offset), valid
 
 
 def query_radiance(params: dict, table: PhotonTable, q: Query) -> jnp.ndarray:
@@ -208,11 +215,7 @@ def query_radiance(params: dict, table: PhotonTable, q: Query) -> jnp.ndarray:
     """
     p = params["params"]
     n, k = q.index.shape
-    photon = table.rows[q.index]  # (B, K, 16)
-    missing = (q.index >= table.rows.shape[0] - 1)[:, :, None]
-    offset = (photon[..., POSITION] - q.position_hi[:, None]) - q.position_lo[:, None]
-    offset = jnp.where(missing, 0.0, offset)
-    valid = jnp.sum(photon[..., NORMAL] * q.normal[:, None], axis=-1) >= NORMAL_COS
+    photon, offset, valid = read_photons(table, q)
     canonical = jax.vmap(canonical_angle)(offset, valid, q.normal)
     angle = jnp.where(jnp.isnan(q.angle), canonical, q.angle)
     frame = jax.vmap(local_frame)(q.normal, angle)  # (B, 3, 3): tangent rows, then normal

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dpm.data.dataset import Shard, load_shard, shard_sizes
+from dpm.data.dataset import ShardCache, shard_sizes
 from dpm.density.gather import PhotonIndex
 from dpm.errors import InputError
 from dpm.nn.config import Config
@@ -37,17 +37,7 @@ class Sampler:
                 points, photons = shard_sizes(entry, budget)
                 if photons >= self.k and points > 0:
                     self.choices.append((i, budget))
-        self.cache: dict[int, Shard] = {}
-        self.indexes: dict[tuple[int, int], PhotonIndex] = {}
-
-    def _shard(self, i: int) -> Shard:
-        if i not in self.cache:
-            if len(self.cache) >= MAX_CACHED_SHARDS:
-                oldest = next(iter(self.cache))
-                del self.cache[oldest]
-                self.indexes = {key: t for key, t in self.indexes.items() if key[0] != oldest}
-            self.cache[i] = load_shard(self.out, self.entries[i], self.budgets)
-        return self.cache[i]
+        self.cache = ShardCache(self.out, self.entries, self.budgets, MAX_CACHED_SHARDS)
 
     def draw(
         self, rng: np.random.Generator, size: int, parts: int
@@ -64,15 +54,13 @@ class Sampler:
             if count == 0:  # fewer points than parts
                 continue
             i, budget = self.choices[pick]
-            shard = self._shard(i)
+            shard = self.cache.shard(i)
             rows = rng.integers(len(shard.position), size=count)
             angle = rng.uniform(0.0, 2 * np.pi, count).astype(np.float32)
-            key = (i, budget)
-            if key not in self.indexes:  # one tree per (scene, budget), kept with the shard
-                self.indexes[key] = PhotonIndex(shard.photons[budget])
+            index = self.cache.per_map(i, budget, PhotonIndex)  # one tree per (scene, budget)
             _, b = next(
                 neighbourhoods(
-                    self.indexes[key],
+                    index,
                     shard.position[rows],
                     shard.normal[rows],
                     shard.albedo[rows],

@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.spatial import cKDTree
 
-from dpm.data.dataset import Shard, load_shard, shard_sizes
+from dpm.data.dataset import ShardCache, shard_sizes
 from dpm.density.base import in_plane, tangent_frame
 from dpm.density.shaped import (
     features,
@@ -86,22 +86,10 @@ class ShapeSampler:
             for c in self.budgets
             if h < c and min(shard_sizes(e, h)[1], shard_sizes(e, c)[1]) >= HISTORY_K[1]
         ]  # fmt: skip
-        self.cache: dict[int, Shard] = {}
-        self.trees: dict[tuple[int, int], cKDTree] = {}
-
-    def _shard(self, i: int) -> Shard:
-        if i not in self.cache:
-            if len(self.cache) >= MAX_CACHED_SHARDS:
-                oldest = next(iter(self.cache))
-                del self.cache[oldest]
-                self.trees = {k: t for k, t in self.trees.items() if k[0] != oldest}
-            self.cache[i] = load_shard(self.out, self.entries[i], self.budgets)
-        return self.cache[i]
+        self.cache = ShardCache(self.out, self.entries, self.budgets, MAX_CACHED_SHARDS)
 
     def _tree(self, i: int, budget: int) -> cKDTree:
-        if (i, budget) not in self.trees:
-            self.trees[i, budget] = cKDTree(self._shard(i).photons[budget].position)
-        return self.trees[i, budget]
+        return self.cache.per_map(i, budget, lambda photons: cKDTree(photons.position))
 
     def draw(
         self, rng: np.random.Generator, size: int, parts: int
@@ -121,7 +109,7 @@ class ShapeSampler:
         return ShapeBatch(x, uv, flux, valid), target, part
 
     def _samples(self, rng: np.random.Generator, i: int, h: int, c: int, count: int) -> tuple:
-        shard = self._shard(i)
+        shard = self.cache.shard(i)
         rows = rng.integers(len(shard.position), size=count)
         pos = shard.position[rows].astype(np.float64)
         normal = shard.normal[rows].astype(np.float64)
