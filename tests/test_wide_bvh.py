@@ -11,7 +11,16 @@ import trimesh
 
 from dpm.tracer import build_bvh, intersect, intersect_brute_force, occluded
 from dpm.tracer.bvh import EMPTY, LEAF_BITS, MAX_LEAF, REFS, WIDTH
-from dpm.tracer.traverse import _box_test, _leaf_test, _planes, hit_box, hit_triangle, ray_setup
+from dpm.tracer.traverse import (
+    _box_test,
+    _entry,
+    _leaf_test,
+    _planes,
+    hit_box,
+    hit_triangle,
+    new_stack,
+    ray_setup,
+)  # fmt: skip
 
 
 def random_soup(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -137,13 +146,14 @@ def _lanes(bounds, node, ox, oy, oz, dx, dy, dz, tmax):
     """The SIMD box test's entry distances (inf where not entered) and the scalar ones."""
     ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
     nx, ny, nz, fx, fy, fz = _planes(ix, iy, iz)
-    hits = _box_test(bounds, node, nx, ny, nz, fx, fy, fz, ox, oy, oz, ix, iy, iz, tmax)
+    stack = new_stack(1)
+    mask = _box_test(bounds, node, nx, ny, nz, fx, fy, fz, ox, oy, oz, ix, iy, iz, tmax, stack)
     simd = np.full(WIDTH, np.inf)
     scalar = np.empty(WIDTH)
     bits = np.empty(1, np.int64)
     for c in range(WIDTH):
-        if hits[0] >> c & 1:
-            bits[0] = hits[1 + c]
+        if mask >> c & 1:
+            bits[0] = _entry(stack, c)
             simd[c] = bits.view(np.float64)[0]
         lo = (bounds[node, c], bounds[node, WIDTH + c], bounds[node, 2 * WIDTH + c])
         hi = (bounds[node, 3 * WIDTH + c], bounds[node, 4 * WIDTH + c], bounds[node, 5 * WIDTH + c])

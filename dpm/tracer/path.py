@@ -28,6 +28,7 @@ RR_START = 3  # vertices before Russian roulette may end a path
 RR_SURVIVAL = 0.95  # the most likely survival of Russian roulette at a diffuse vertex
 DIMS_PER_VERTEX = 8  # Fresnel, light pick, light point (2), direction (2), roulette, spare
 SAMPLES_PER_TASK = 64
+SCATTER = 2**31 - 1  # a prime above any task count: i -> i·SCATTER mod n is a permutation
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
@@ -238,7 +239,10 @@ def pixels_kernel(
     n_tasks = (n + per_task - 1) // per_task
     hits = np.zeros(n_tasks, np.int64)
     bad = np.zeros(n_tasks, np.int64)
-    for task in nb.prange(n_tasks):
+    for i in nb.prange(n_tasks):
+        # Threads take contiguous ranges of i; scattering the tasks they map to over the rows
+        # evens out their work where one part of the image costs more than another.
+        task = (i * SCATTER) % n_tasks
         stack = new_stack(depth)
         for p in range(task * per_task, min(n, (task + 1) * per_task)):
             v = path_pixel(

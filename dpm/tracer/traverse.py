@@ -117,25 +117,30 @@ def _box_test_codegen(context, builder, sig, args):
         t0 = builder.select(builder.fcmp_ordered(">", near, t0), near, t0)
         t1 = builder.select(builder.fcmp_ordered("<", far, t1), far, t1)
     hit = builder.fcmp_ordered("<=", t0, t1)
-    mask = builder.zext(builder.bitcast(hit, ir.IntType(WIDTH)), i64)
-    bits = builder.bitcast(t0, ir.VectorType(i64, WIDTH))
-    lanes = [builder.extract_element(bits, ir.Constant(i32, c)) for c in range(WIDTH)]
-    return context.make_tuple(builder, sig.return_type, [mask, *lanes])
+    # The entry distances go to memory, not into a tuple: reading a tuple at a lane index
+    # known only at run time compiles to jump tables, whose mispredictions cost more.
+    vi64 = ir.VectorType(i64, WIDTH)
+    scratch = context.make_array(sig.args[15])(context, builder, args[15])
+    rows = builder.extract_value(scratch.shape, 0)
+    first = builder.mul(builder.sub(rows, ir.Constant(i64, WIDTH // 2)), ir.Constant(i64, 2))
+    out = builder.bitcast(builder.gep(scratch.data, [first]), vi64.as_pointer())
+    builder.store(builder.bitcast(t0, vi64), out, align=8)
+    return builder.zext(builder.bitcast(hit, ir.IntType(WIDTH)), i64)
 
 
 @intrinsic
-def _box_test(typingctx, bounds, node, nx, ny, nz, fx, fy, fz, ox, oy, oz, ix, iy, iz, tmax):
-    """(mask, d_0, ..., d_WIDTH-1): which child boxes of a node record the ray enters before
-    tmax (bit c for child c), and the bits of each entry distance (`_bits`; valid if entered).
+def _box_test(
+    typingctx, bounds, node, nx, ny, nz, fx, fy, fz, ox, oy, oz, ix, iy, iz, tmax, stack
+):  # fmt: skip
+    """Which child boxes of a node record the ray enters before tmax (bit c for child c); the
+    bits of each entry distance (`_bits`; valid if entered) go to `_entry(stack, c)`.
 
     Columns nx, ny, nz of the node record hold the WIDTH near planes of each axis for the ray
     (the min planes where the direction is positive, the max planes where negative) and
     fx, fy, fz the far ones. Per lane this is exactly `hit_box`, with the same float64
     operations in the same order.
     """
-    sig = types.UniTuple(types.int64, WIDTH + 1)(
-        bounds, node, nx, ny, nz, fx, fy, fz, ox, oy, oz, ix, iy, iz, tmax
-    )
+    sig = types.int64(bounds, node, nx, ny, nz, fx, fy, fz, ox, oy, oz, ix, iy, iz, tmax, stack)
     return sig, _box_test_codegen
 
 
@@ -288,9 +293,16 @@ def _planes(ix, iy, iz):
 def new_stack(depth):
     """Traversal scratch for one thread: int64 rows of (node reference, entry distance bits).
 
-    A wide node pushes at most WIDTH - 1 more entries than it pops, per level of `depth`.
+    A wide node pushes at most WIDTH - 1 more entries than it pops, per level of `depth`; the
+    last WIDTH / 2 rows hold the entry distances of the latest box test (`_entry`).
     """
-    return np.empty(((WIDTH - 1) * depth + 1, 2), np.int64)
+    return np.empty(((WIDTH - 1) * depth + 1 + WIDTH // 2, 2), np.int64)
+
+
+@nb.njit(cache=True, inline="always")
+def _entry(stack, c):
+    """The bits of child c's entry distance from the latest `_box_test` on this stack."""
+    return stack[stack.shape[0] - WIDTH // 2 + (c >> 1), c & 1]
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
@@ -311,10 +323,8 @@ def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     ref, sp = 0, 0
     while True:
         if ref >= 0:
-            hits = _box_test(bounds, ref, nx, ny, nz, fx, fy, fz, ox, oy, oz, ix, iy, iz, far)
-            m = hits[0]
+            m = _box_test(bounds, ref, nx, ny, nz, fx, fy, fz, ox, oy, oz, ix, iy, iz, far, stack)
             if m != 0:
-                dist = hits[1:]
                 c = _lowest_bit(m)
                 m &= m - 1
                 if m == 0:  # one child entered: descend, no stack traffic
@@ -322,7 +332,8 @@ def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
                     continue
                 c2 = _lowest_bit(m)
                 m &= m - 1
-                a, da, b, db = kids[ref, REFS + c], dist[c], kids[ref, REFS + c2], dist[c2]
+                a, da = kids[ref, REFS + c], _entry(stack, c)
+                b, db = kids[ref, REFS + c2], _entry(stack, c2)
                 if db < da:
                     a, da, b, db = b, db, a, da
                 if m == 0:  # two: descend into the nearer, the farther waits
@@ -338,7 +349,7 @@ def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
                 while m != 0:
                     c = _lowest_bit(m)
                     m &= m - 1
-                    dc = dist[c]
+                    dc = _entry(stack, c)
                     j = sp
                     while j > base and stack[j - 1, 1] < dc:
                         stack[j, 0], stack[j, 1] = stack[j - 1, 0], stack[j - 1, 1]
@@ -389,7 +400,7 @@ def any_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     while sp > 0:
         sp -= 1
         node = stack[sp, 0]
-        m = _box_test(bounds, node, nx, ny, nz, fx, fy, fz, ox, oy, oz, ix, iy, iz, far)[0]
+        m = _box_test(bounds, node, nx, ny, nz, fx, fy, fz, ox, oy, oz, ix, iy, iz, far, stack)
         while m != 0:
             c = _lowest_bit(m)
             m &= m - 1
