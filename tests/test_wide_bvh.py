@@ -20,7 +20,7 @@ from dpm.tracer.traverse import (
     hit_triangle,
     new_stack,
     ray_setup,
-)  # fmt: skip
+)
 
 
 def random_soup(rng: np.random.Generator, n: int) -> np.ndarray:
