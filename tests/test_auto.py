@@ -9,23 +9,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import write_scene
+from conftest import FLOOR_AND_LIGHT_MTL, FLOOR_AND_LIGHT_OBJ, write_scene
 from dpm import load_scene
 from dpm.io import KNEE, linear_to_srgb8, tone_map
 from dpm.methods import auto
 from dpm.render import RenderOptions, render
 
 # The floor and light of conftest, and a glass slab between them: caustics.
-GLASS_OBJ = """\
-mtllib scene.mtl
-v -1 0 -1
-v 1 0 -1
-v 1 0 1
-v -1 0 1
-v -0.1 1 -0.1
-v 0.1 1 -0.1
-v 0.1 1 0.1
-v -0.1 1 0.1
+GLASS_OBJ = (
+    FLOOR_AND_LIGHT_OBJ
+    + """\
 v -0.3 0.5 -0.3
 v 0.3 0.5 -0.3
 v 0.3 0.5 0.3
@@ -34,23 +27,19 @@ v -0.3 0.4 -0.3
 v 0.3 0.4 -0.3
 v 0.3 0.4 0.3
 v -0.3 0.4 0.3
-usemtl floor
-f 1 4 3 2
-usemtl light
-f 5 6 7 8
 usemtl glass
 f 9 12 11 10
 f 13 14 15 16
 """
-GLASS_MTL = """\
-newmtl floor
-Kd 0.5 0.5 0.5
-newmtl light
-Ke 10 10 10
+)
+GLASS_MTL = (
+    FLOOR_AND_LIGHT_MTL
+    + """\
 newmtl glass
 illum 7
 Ni 1.5
 """
+)
 CAMERA = """\
 [camera]
 origin = [0, 2.5, 2.5]
