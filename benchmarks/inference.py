@@ -14,6 +14,10 @@ example scene (default the ring; its caustic photons of M emitted paths, seed 0)
 - achieved GFLOP/s (executed FLOPs over the network's seconds) and its fraction of the peak:
   the best fp32 matmul rate JAX reaches here in the same run (n×n by n×n, XLA's own dots and
   the YNNPACK dots the network uses).
+- the same for the network's four 32×32 dense layers alone (bias and ReLU; no gathers,
+  features, pooling or output), as flat matmuls over as many photon rows per step as the
+  network's steps hold: what XLA's dots reach on this architecture's shapes here, the
+  ceiling of the network's own rate.
 Prints `fraction of peak: X` (the worst of the four) and writes
 benchmarks/results/inference.md; `--quick` (CI) runs 4,096 points once and writes nothing.
 """
@@ -33,7 +37,12 @@ import numpy as np
 from common import RESULTS, SCENES, M, markdown_table
 from dpm import load_scene
 from dpm.density.gather import PhotonIndex
-from dpm.nn.infer import fast_dots, make_query_predict, predict_points
+from dpm.nn.infer import (
+    ACTIVATIONS_PER_CHUNK,
+    fast_dots,
+    make_query_predict,
+    predict_points,
+)
 from dpm.nn.weights import load_weights, shipped_weights
 from dpm.tracer import build_bvh, trace_photons, trace_visible_points
 
@@ -69,6 +78,29 @@ def peak_gflops(sizes: tuple[int, ...], rounds: int) -> float:
             seconds = best_of(lambda mm=mm, a=a: jax.block_until_ready(mm(a)), rounds)
             best = max(best, 2 * n**3 / seconds / 1e9)
     return best
+
+
+def layers_alone(params: dict, rows: int, rounds: int) -> float:
+    """GFLOP/s of the 32×32 dense layers of KernelNet's params (extractor Dense_1, Dense_2;
+    predictor Dense_0's photon half, Dense_1), each with bias and ReLU, chained over `rows`
+    photon rows in steps of ACTIVATIONS_PER_CHUNK rows, as the network runs them."""
+    p = params["params"]
+    width = p["Extractor_0"]["Dense_1"]["kernel"].shape[0]
+    layers = [p["Extractor_0"]["Dense_1"], p["Extractor_0"]["Dense_2"], p["Dense_1"]]
+    own = {"kernel": p["Dense_0"]["kernel"][:width], "bias": p["Dense_0"]["bias"]}
+    layers = [jax.tree.map(jnp.asarray, layer) for layer in (*layers[:2], own, layers[2])]
+    steps = max(1, rows // ACTIVATIONS_PER_CHUNK)
+    x = jnp.asarray(np.random.default_rng(0).random((steps, ACTIVATIONS_PER_CHUNK, width)))
+    x = x.astype(jnp.float32)
+
+    def chain(h: jnp.ndarray) -> jnp.ndarray:
+        for layer in layers:
+            h = jax.nn.relu(h @ layer["kernel"] + layer["bias"])
+        return h
+
+    run = jax.jit(lambda x: jax.lax.map(chain, x), compiler_options=fast_dots())
+    seconds = best_of(lambda: jax.block_until_ready(run(x)), rounds)
+    return 2 * width * width * len(layers) * x.shape[0] * x.shape[1] / seconds / 1e9
 
 
 def best_of(fn, rounds: int) -> float:
@@ -129,8 +161,8 @@ def measure(name: str, points: tuple[int, ...], rounds: int) -> list[dict]:
     return rows
 
 
-def report(rows: list[dict], peak: float, name: str) -> list[str]:
-    """The markdown lines of the results."""
+def report(rows: list[dict], peak: float, alone: float, name: str) -> list[str]:
+    """The markdown lines of the results (alone: GFLOP/s of the dense layers alone)."""
     head = ["model", "points", "FLOPs/point executed", "as written", "network s", "gather s",
             "GFLOP/s", "fraction of peak"]  # fmt: skip
     body = [[f"DPM-{r['k']}", f"{r['points']:,}", f"{r['executed']:,}", f"{r['written']:,}",
@@ -141,6 +173,10 @@ def report(rows: list[dict], peak: float, name: str) -> list[str]:
         f"Peak: {peak:.0f} GFLOP/s (best fp32 matmul in JAX, same run).",
         "",
         *markdown_table(head, body),
+        "",
+        f"The network's four 32×32 dense layers alone (bias, ReLU; no gathers, features or "
+        f"pooling), {ACTIVATIONS_PER_CHUNK:,} photon rows a step: {alone:.1f} GFLOP/s, "
+        f"{alone / peak:.2f} of peak.",
         "",
         f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; "
         f"JAX {jax.__version__}; {datetime.date.today().isoformat()}",
@@ -156,7 +192,9 @@ def main() -> None:
     points, rounds, sizes = ((4096,), 1, (512,)) if args.quick else (POINTS, 3, (1024, 2048))
     peak = peak_gflops(sizes, rounds + 2)
     rows = measure(args.scene, points, rounds)
-    lines = report(rows, peak, args.scene)
+    params = load_weights(shipped_weights(KS[0])).params
+    alone = layers_alone(params, points[0] * KS[0], rounds + 2)
+    lines = report(rows, peak, alone, args.scene)
     print("\n".join(lines))
     print(f"fraction of peak: {min(r['gflops'] for r in rows) / peak:.2f}")
     if not args.quick:
