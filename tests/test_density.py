@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numba
 import numpy as np
 import pytest
 
@@ -18,6 +19,7 @@ from dpm.methods.sppm import sppm_caustics
 from dpm.metrics import rmse
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap, VisiblePoints, build_bvh, trace_photons, trace_visible_points
+from dpm.tracer.photon_grid import grid_irradiance, photon_grid
 
 EXAMPLES = Path(__file__).parent.parent / "examples" / "scenes"
 
@@ -305,3 +307,29 @@ def test_tuning_widens_the_radius_grid_until_the_best_is_inside() -> None:
         assert tried[0] < best(trials, method).radius < tried[-1]
     # the kept estimates line up with the trials: rescoring against the same reference is exact
     assert rescore(trials, estimates, points, reference) == trials
+
+
+@numba.njit
+def _grid_sums(grid, position, normal, out):
+    for i in range(len(position)):
+        p, n = position[i], normal[i]
+        out[i] = grid_irradiance(grid, p[0], p[1], p[2], n[0], n[1], n[2])
+
+
+@pytest.mark.parametrize("radius", [1e-3, 0.03, 0.2, 5.0])
+def test_photon_grid_sums_the_photons_within_the_radius(radius: float) -> None:
+    photons = plane_photons(4000, 3)
+    tilted = np.arange(4000) % 3 == 0  # a third face away: the normal test drops them
+    photons.normal[tilted] = [0.0, 0.8, -0.6]
+    rng = np.random.default_rng(4)
+    position = rng.uniform(-0.2, 1.2, (300, 3))
+    position[:150, 2] = 0.0  # on the plane, and some off it
+    position[:20, :2] = photons.position[:20, :2]  # right on photons
+    normal = np.tile([0.0, 0.0, 1.0], (300, 1))
+    out = np.zeros((300, 3))
+    _grid_sums(photon_grid(photons, radius), position, normal, out)
+    near = np.linalg.norm(photons.position[None].astype(np.float64) - position[:, None], axis=2)
+    counts = (near < radius) & ~tilted
+    expected = counts @ photons.flux.astype(np.float64) / (np.pi * radius**2)
+    np.testing.assert_allclose(out, expected, rtol=1e-12, atol=0)
+    assert counts.sum() > 0 or radius < 0.01

@@ -7,6 +7,7 @@ of the lights, or our own path tracer through a different light-path split.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numba
@@ -19,6 +20,7 @@ from conftest import FLOOR_AND_LIGHT_MTL, write_scene
 from dpm import load_scene
 from dpm.render import RenderOptions, render
 from dpm.tracer import build_bvh, shade, trace_photons, trace_visible_points
+from dpm.tracer.photon_grid import photon_grid
 from dpm.validation.noise import block_z
 
 EXAMPLES = Path(__file__).parent.parent / "examples" / "scenes"
@@ -254,20 +256,26 @@ def test_pt_nocaustic_plus_photon_caustics_matches_pt(tmp_path: Path) -> None:
     bvh = build_bvh(scene)
     camera = scene.camera.with_resolution(32, 32)
     spp = 64
-    full, split = [], []
+    full, split, gridded = [], [], []
     for seed in (1, 2):
         points = trace_visible_points(scene, bvh, camera, spp, seed, (0, 32))
         photons = trace_photons(scene, bvh, 1_000_000, seed=seed, caustic_only=True)
         rest, _ = shade(scene, bvh, points, seed, caustics=False)
         caustic = caustic_radiance(scene, points, photons, radius=0.01)
         both, _ = shade(scene, bvh, points, seed + 10, caustics=True)
-        for out, reflected in ((full, both), (split, rest + caustic)):
+        # the photons also at the later diffuse vertices (auto's passes): the same light
+        later, _ = shade(scene, bvh, points, seed, False, photon_grid(photons, 0.02))
+        dark = replace(photons, flux=np.zeros_like(photons.flux))
+        without, _ = shade(scene, bvh, points, seed, False, photon_grid(dark, 0.02))
+        assert np.mean(rest - without) > 0.05 * np.mean(rest)  # those paths matter here
+        for out, reflected in ((full, both), (split, rest + caustic), (gridded, later + caustic)):
             radiance = points.emitted + points.throughput * reflected
             out.append(radiance.reshape(32, 32, spp, 3).mean(axis=2))
         assert np.mean(points.throughput * caustic) > 0.1 * np.mean(split[-1])  # caustics matter
-    z = block_z(full, split)
-    assert np.abs(z).max() < 4, np.round(z[..., 0], 1)
-    assert np.mean(split) == pytest.approx(np.mean(full), rel=0.01)
+    for estimate in (split, gridded):
+        z = block_z(full, estimate)
+        assert np.abs(z).max() < 4, np.round(z[..., 0], 1)
+        assert np.mean(estimate) == pytest.approx(np.mean(full), rel=0.01)
 
 
 @pytest.mark.parametrize("name", sorted(p.stem for p in EXAMPLES.glob("*.obj")))

@@ -20,8 +20,8 @@ from scipy.spatial import cKDTree
 
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap
+from dpm.tracer.photon_grid import NORMAL_COS
 
-NORMAL_COS = 0.5  # a photon counts when dot(photon normal, point normal) ≥ this
 POINTS_PER_CHUNK = 1 << 14  # K-nearest queries answered at once
 PHOTONS_PER_CHUNK = 1 << 16  # photons of a pass whose points are sought at once
 GATHER = "gather"  # the stopwatch stage of tree building and queries

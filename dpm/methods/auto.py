@@ -3,8 +3,13 @@
 Every pass traces one camera sample per pixel, path-traces it without the caustics and, when
 the plan keeps caustics, traces a pass of photon paths into SPPM's per-pixel statistics at
 the same visible points (Hachisuka & Jensen 2009): consistent, so every pass makes the image
-better. `--time` renders passes until the budget (counted from the process start) would be
-overrun; without it `--spp` passes are rendered with `--photons` paths in all.
+better. The pass's photons also give the caustic light at the path's later diffuse vertices
+(a density estimate from a hashed grid, in place of the BSDF-sampled paths that reach a light
+through glass or a mirror from there: the fireflies of light that a caustic throws onto a
+surface the camera sees by a diffuse bounce); its radius shrinks pass by pass as in
+probabilistic PPM (Knaus & Zwicker 2011), so that estimate is consistent too.
+`--time` renders passes until the budget (counted from the process start) would be overrun;
+without it `--spp` passes are rendered with `--photons` paths in all.
 
 The plan is made after the first pass, from what it found (deterministic: same seed, same
 plan): no photons where the scene has no mirror or glass, or where the first pass's photons
@@ -42,10 +47,12 @@ from dpm.tracer import (
     trace_pixels,
     trace_visible_points,
 )
+from dpm.tracer.photon_grid import photon_grid
 
 RADIUS_FOOTPRINTS = 2.0  # initial radius per pixel, in pixel footprints at its first point
 PHOTONS_PER_PIXEL = 4.0  # photon paths per pass per pixel when the plan keeps caustics (tuned:
 # benchmarks/auto_tuning.py, best on the ring, tied on glass egg, pool1 and dragon)
+GRID_RADII = 4.0  # first radius at later diffuse vertices, in median first-pass pixel radii
 MIN_CAUSTIC_SHARE = 1e-3  # caustics under this share of the first pass's light are left out
 # Seconds kept for what follows the last pass (denoising, writing): a fixed part and per pixel.
 FINISH_SECONDS, FINISH_SECONDS_PER_PIXEL = 0.05, 3e-6
@@ -153,6 +160,7 @@ class Auto(Method):
         if not has_specular(scene):
             plan = make_plan(scene, pixels, 1.0, 0.0, None)
         dropped = 0
+        grid_radius = 0.0  # set at the first pass, then shrunk by each (probabilistic PPM)
         total = o.spp if deadline is None else None
         bar = tqdm(total=total, unit="pass", disable=not o.progress, desc=self.name)
         j = last = 0
@@ -170,28 +178,34 @@ class Auto(Method):
             else:
                 with watch("visible_points"):
                     points = trace_visible_points(scene, bvh, camera, 1, seed, (0, h))
-                if j == 0 and o.radius is None:
-                    state.radius = footprint_radius(points, camera)
-                if full:
-                    with watch("shade"):
-                        reflected, bad = shade(scene, bvh, points, seed, caustics=False)
-                        path_sum += points.emitted + points.throughput * reflected
-                    dropped += bad
-                    a, n = guides(points)
-                    albedo += a
-                    normal += n
+                if j == 0:
+                    if o.radius is None:
+                        state.radius = footprint_radius(points, camera)
+                    grid_radius = GRID_RADII * float(np.median(state.radius))
                 n_paths = first_photons if plan is None else plan.photons_per_pass
+                photons = None
                 if n_paths and (plan is None or plan.caustics != "off"):
                     with watch("photons"):
                         photons = trace_photons(
                             scene, bvh, n_paths, o.seed, caustic_only=True, first_path=state.paths
                         )
+                if full:
+                    with watch("shade"):
+                        grid = None if photons is None else photon_grid(photons, grid_radius)
+                        reflected, bad = shade(scene, bvh, points, seed, False, grid)
+                        path_sum += points.emitted + points.throughput * reflected
+                    dropped += bad
+                    a, n = guides(points)
+                    albedo += a
+                    normal += n
+                if photons is not None:
                     sppm_gather(state, points, photons, watch)
             if plan is None:
                 path_light = float(path_sum.mean(axis=1).sum()) if full else 0.0
                 caustic_light = float(state.irradiance().mean(axis=1).sum())
                 plan = make_plan(scene, pixels, path_light, caustic_light, given, why)
             j += 1
+            grid_radius *= np.sqrt((j + ALPHA) / (j + 1))  # Knaus & Zwicker 2011, Eq. 17
             bar.update(1)
             now = time.monotonic()
             last, begun = now - begun, now  # a pass's time includes what runs between passes

@@ -18,6 +18,7 @@ from dpm.scene import DIFFUSE, Scene
 from dpm.tracer.bsdf import scatter_specular, specular_survival
 from dpm.tracer.bvh import BVH
 from dpm.tracer.lights import light_pdf_solid_angle, sample_light_point
+from dpm.tracer.photon_grid import PhotonGrid, grid_irradiance
 from dpm.tracer.sampling import sample_cosine, uniform
 from dpm.tracer.surface import next_surface
 from dpm.tracer.traverse import any_hit, new_stack, spawn_offset
@@ -58,16 +59,22 @@ def _unoccluded(bvh, ax, ay, az, bx, by, bz, stack):
 # atomic updates per ray on counters that both threads share, which cost a third of the
 # shading time on two cores. Functions it calls inherit the setting.
 @nb.njit(cache=True, _nrt=False, error_model="numpy")
-def shade_one(bvh, sc, seed, stream, eps, caustics, stack, px, py, pz, nx, ny, nz, ar, ag, ab):
+def shade_one(
+    bvh, sc, seed, stream, eps, caustics, grid, stack, px, py, pz, nx, ny, nz, ar, ag, ab
+):  # fmt: skip
     """RGB radiance reflected by the diffuse point p (normal n towards the viewer, albedo a)."""
     return shade_path(
-        bvh, sc, seed, stream, eps, caustics, stack, px, py, pz, nx, ny, nz, ar, ag, ab
+        bvh, sc, seed, stream, eps, caustics, grid, stack, px, py, pz, nx, ny, nz, ar, ag, ab
     )
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
-def shade_path(bvh, sc, seed, stream, eps, caustics, stack, px, py, pz, nx, ny, nz, ar, ag, ab):
-    """`shade_one`, inlined where its callers are compiled."""
+def shade_path(
+    bvh, sc, seed, stream, eps, caustics, grid, stack, px, py, pz, nx, ny, nz, ar, ag, ab
+):  # fmt: skip
+    """`shade_one`, inlined where its callers are compiled. With a PhotonGrid `grid` (None:
+    none), the light that reaches the diffuse vertices after p through specular chains is
+    its density estimate there instead of BSDF-sampled S+ L ends."""
     inv_pi = 1.0 / math.pi
     lr = lg = lb = 0.0
     br, bg, bb = ar, ag, ab  # path weight including the BSDF·cos/pdf of the current vertex
@@ -76,6 +83,11 @@ def shade_path(bvh, sc, seed, stream, eps, caustics, stack, px, py, pz, nx, ny, 
         dim = SHADE_DIM0 + DIMS_PER_VERTEX * vertex
         if br <= 0 and bg <= 0 and bb <= 0:
             break
+        if grid is not None and vertex > 0:  # a diffuse vertex after p: its caustic light
+            er, eg, eb = grid_irradiance(grid, px, py, pz, nx, ny, nz)
+            lr += br * er * inv_pi
+            lg += bg * eg * inv_pi
+            lb += bb * eb * inv_pi
         # Next-event estimation: one point on the lights, weighted against BSDF sampling.
         lt, qx, qy, qz, area_pdf = sample_light_point(
             sc, uniform(seed, stream, dim + 1), uniform(seed, stream, dim + 2),
@@ -122,10 +134,10 @@ def shade_path(bvh, sc, seed, stream, eps, caustics, stack, px, py, pz, nx, ny, 
             if front and sc.emitter_pdf[tri] > 0:
                 if specular == 0:  # light sampling could have found it: MIS
                     w = _power2(pdf_b, light_pdf_solid_angle(sc, tri, t, cos_i))
-                elif caustics or vertex > specular + 1:
+                elif caustics or (grid is None and vertex > specular + 1):
                     w = 1.0  # only BSDF sampling reaches lights through specular chains
                 else:
-                    w = 0.0  # an S+ L end at the visible point: the caustic estimate's share
+                    w = 0.0  # an S+ L end: the caustic estimate's share (at p, or the grid's)
                 e = sc.emission[m]
                 lr += br * e[0] * w
                 lg += bg * e[1] * w
@@ -153,7 +165,9 @@ def shade_path(bvh, sc, seed, stream, eps, caustics, stack, px, py, pz, nx, ny, 
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
-def shade_kernel(bvh, depth, sc, position, normal, albedo, hit, sample, seed, eps, caustics, out):
+def shade_kernel(
+    bvh, depth, sc, position, normal, albedo, hit, sample, seed, eps, caustics, grid, out
+):  # fmt: skip
     """Reflected radiance (N, 3) of visible points into out; returns the non-finite count."""
     n = len(hit)
     n_tasks = (n + SAMPLES_PER_TASK - 1) // SAMPLES_PER_TASK
@@ -165,7 +179,7 @@ def shade_kernel(bvh, depth, sc, position, normal, albedo, hit, sample, seed, ep
             if not hit[i]:
                 continue
             r, g, b = shade_one(
-                bvh, sc, seed, sample[i], eps, caustics, stack,
+                bvh, sc, seed, sample[i], eps, caustics, grid, stack,
                 position[i, 0], position[i, 1], position[i, 2],
                 normal[i, 0], normal[i, 1], normal[i, 2],
                 albedo[i, 0], albedo[i, 1], albedo[i, 2],
@@ -178,17 +192,27 @@ def shade_kernel(bvh, depth, sc, position, normal, albedo, hit, sample, seed, ep
 
 
 def shade(
-    scene: Scene, bvh: BVH, points: VisiblePoints, seed: int, caustics: bool = True
+    scene: Scene,
+    bvh: BVH,
+    points: VisiblePoints,
+    seed: int,
+    caustics: bool = True,
+    grid: PhotonGrid | None = None,
 ) -> tuple[np.ndarray, int]:
     """Radiance (N, 3) float32 each visible point reflects towards the camera (before the
     camera-path throughput), and how many non-finite samples were dropped (set to zero).
 
-    caustics=False leaves out the S+ L ends at the visible point (pt-nocaustic).
+    caustics=False leaves out the S+ L ends at the visible point (pt-nocaustic); with it, a
+    grid of the pass's caustic photons (L S+ D) also takes the place of the S+ L ends at the
+    later diffuse vertices, by its density estimate there.
     """
+    if grid is not None and caustics:
+        raise ValueError("a photon grid replaces caustic paths: it needs caustics=False")
     out = np.zeros((len(points), 3), np.float32)
     bad = shade_kernel(
         bvh.arrays, bvh.depth, scene.kernel_arrays(), points.position, points.normal,
-        points.albedo, points.hit, points.sample, seed, spawn_offset(scene), caustics, out,
+        points.albedo, points.hit, points.sample, seed, spawn_offset(scene), caustics, grid,
+        out,
     )  # fmt: skip
     return out, int(bad)
 
@@ -208,7 +232,7 @@ def path_pixel(bvh, sc, cam, width, height, pix, spp, seed, eps, caustics, stack
         if v[0]:
             hits += 1
             r, g, b = shade_path(
-                bvh, sc, seed, stream, eps, caustics, stack,
+                bvh, sc, seed, stream, eps, caustics, None, stack,
                 v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], v[9],
             )  # fmt: skip
             if math.isfinite(r) and math.isfinite(g) and math.isfinite(b):
