@@ -85,13 +85,14 @@ def layers_alone(params: dict, rows: int, rounds: int) -> float:
     predictor Dense_0's photon half, Dense_1), each with bias and ReLU, chained over `rows`
     photon rows in steps of ACTIVATIONS_PER_CHUNK rows, as the network runs them."""
     p = params["params"]
-    width = p["Extractor_0"]["Dense_1"]["kernel"].shape[0]
-    layers = [p["Extractor_0"]["Dense_1"], p["Extractor_0"]["Dense_2"], p["Dense_1"]]
-    own = {"kernel": p["Dense_0"]["kernel"][:width], "bias": p["Dense_0"]["bias"]}
-    layers = [jax.tree.map(jnp.asarray, layer) for layer in (*layers[:2], own, layers[2])]
+    extractor, first = p["Extractor_0"], p["Dense_0"]
+    width = extractor["Dense_1"]["kernel"].shape[0]
+    own = {"kernel": first["kernel"][:width], "bias": first["bias"]}
+    layers = [extractor["Dense_1"], extractor["Dense_2"], own, p["Dense_1"]]
+    layers = [jax.tree.map(jnp.asarray, layer) for layer in layers]
     steps = max(1, rows // ACTIVATIONS_PER_CHUNK)
-    x = jnp.asarray(np.random.default_rng(0).random((steps, ACTIVATIONS_PER_CHUNK, width)))
-    x = x.astype(jnp.float32)
+    x = np.random.default_rng(0).random((steps, ACTIVATIONS_PER_CHUNK, width), np.float32)
+    x = jnp.asarray(x)
 
     def chain(h: jnp.ndarray) -> jnp.ndarray:
         for layer in layers:

@@ -27,6 +27,7 @@ from scipy.spatial import cKDTree
 
 from dpm.data.dataset import ShardCache, shard_sizes
 from dpm.density.base import in_plane, tangent_frame
+from dpm.density.gather import NORMAL_COS
 from dpm.density.shaped import (
     features,
     pair_moments,
@@ -40,7 +41,6 @@ from dpm.nn.shape_net import point_precisions
 
 HISTORY_K = (4, 256)  # history photons in the disc: log-uniform in this range
 MAX_CURRENT = 1024  # current photons kept per disc (a random subset, flux scaled, beyond)
-NORMAL_COS = 0.5  # as dpm.density.gather: photons on another surface do not count
 MAX_CACHED_SHARDS = 64
 
 
