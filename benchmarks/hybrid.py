@@ -8,10 +8,13 @@ The hybrid renders first with its defaults (`dpm-render --method hybrid`); its w
 timed at a few samples per pixel and then given the sample count that fills the budget. All
 three are denoised by the same OIDN call with their own albedo and normal images.
 
-Reference: dpm `pt-nocaustic` at REF_SPP plus the PPM caustic reference (guided emission, two
-halves) at the visible points of REF_CAUSTIC_SPP samples per pixel, averaged per pixel. It is
-checked against Mitsuba 3 at MITSUBA_CHECK_SPP (RMSE and mean ratio in the report). The
-reference image is cached in benchmarks/results/hybrid/SCENE-reference.exr.
+Reference: dpm `pt-nocaustic` at REF_SPP paths per pixel, then REF_ROUNDS rounds that each
+add as many again where they lower the error most (`dpm.methods.adaptive`: the few pixels
+that see a small light through glass or water need hundreds of times more), plus the PPM
+caustic reference (guided emission, two halves) at the visible points of REF_CAUSTIC_SPP
+samples per pixel, averaged per pixel. It is checked against Mitsuba 3 at MITSUBA_CHECK_SPP
+(RMSE and mean ratio in the report). The reference image is cached in
+benchmarks/results/hybrid/SCENE-reference.exr.
 
 Writes benchmarks/results/hybrid.md and benchmarks/results/hybrid/SCENE.png (the three images
 and the reference side by side). The report also times the README's default render
@@ -34,16 +37,19 @@ from common import RESULTS, SCENES, timed
 from dpm import load_scene
 from dpm.camera import Camera
 from dpm.denoise import denoise
+from dpm.density.progressive import pass_seed
 from dpm.density.reference import ppm_reference
 from dpm.io import linear_to_srgb8, read_exr, write_image
+from dpm.methods.adaptive import Halves
 from dpm.metrics import rmse
 from dpm.render import RenderOptions, render
 from dpm.scene import Scene
-from dpm.tracer import build_bvh, trace_visible_points
+from dpm.tracer import build_bvh, trace_listed, trace_visible_points
 from dpm.validation.mitsuba import load_mitsuba, mitsuba_scene
 
 OUT = RESULTS / "hybrid"
 REF_SPP = 4096  # pt-nocaustic samples per pixel of the reference
+REF_ROUNDS = 3  # adaptive rounds after it, each of REF_SPP paths per pixel on average
 REF_CAUSTIC_SPP = 4  # visible points per pixel of the caustic reference
 REF_CAUSTIC_PATHS = 50_000_000  # guided photon paths of the caustic reference
 MITSUBA_CHECK_SPP = 4096
@@ -66,17 +72,37 @@ def caustic_reference(scene: Scene, camera: Camera, folder: Path) -> tuple[np.nd
     return image.astype(np.float32), ref.noise
 
 
+def nocaustic_reference(scene: Scene, camera: Camera) -> tuple[np.ndarray, float]:
+    """(H, W, 3) `pt-nocaustic` radiance per pixel, converged adaptively (two cross-fitted
+    halves, `dpm.methods.adaptive`), and its expected RMSE (luminance)."""
+    bvh = build_bvh(scene)
+    n = camera.width * camera.height
+    paths = Halves(camera.height, camera.width)
+    every = np.arange(n)
+    for half in range(2):
+        sums, squares, _ = trace_listed(
+            scene, bvh, camera, every, np.full(n, REF_SPP // 2), pass_seed(1000, 0, half + 1)
+        )
+        paths.base[half].add(every, REF_SPP // 2, sums, squares)
+    print(f"path reference: {REF_SPP} paths per pixel, noise {paths.noise():.4f}", flush=True)
+    for r in range(1, 1 + REF_ROUNDS):
+        for half in range(2):
+            pixels, counts = paths.plan_extra(half, REF_SPP * n // 2, 64 * REF_SPP)
+            seed = pass_seed(1000, r, half + 1)
+            sums, squares, _ = trace_listed(scene, bvh, camera, pixels, counts, seed)
+            paths.extra[half].add(pixels, counts, sums, squares)
+        print(f"path reference round {r}: noise {paths.noise():.4f}", flush=True)
+    return paths.mean().astype(np.float32).reshape(camera.height, camera.width, 3), paths.noise()
+
+
 def reference(scene: Scene, camera: Camera, name: str, path: Path | None = None) -> np.ndarray:
     """The long reference image (H, W, 3), cached as an EXR at `path` (default: OUT)."""
     path = path or OUT / f"{name}-reference.exr"
     if path.exists():
         return read_exr(path)
-    size = {"width": camera.width, "height": camera.height}
-    nocaustic = render(
-        scene, RenderOptions(method="pt-nocaustic", spp=REF_SPP, seed=1000, **size)
-    ).image
+    nocaustic, path_noise = nocaustic_reference(scene, camera)
     caustic, noise = caustic_reference(scene, camera, path.with_name(f"{path.stem}-caustic"))
-    print(name, f"caustic reference noise {noise:.5f}", flush=True)
+    print(name, f"reference noise: paths {path_noise:.5f}, caustics {noise:.5f}", flush=True)
     image = nocaustic + caustic
     write_image(path, image)
     return image

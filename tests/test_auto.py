@@ -118,6 +118,13 @@ def test_same_seed_same_image_whatever_the_thread_count(glass) -> None:
     np.testing.assert_array_equal(*images)
 
 
+def test_adaptive_extra_paths_are_spent_and_reproducible(glass) -> None:
+    passes = auto.ADAPT_AFTER + 4
+    first, again = (render(glass, options(spp=passes, seed=6)) for _ in range(2))
+    assert first.stats["extra_paths"] > 0
+    np.testing.assert_array_equal(first.image, again.image)
+
+
 def test_a_scene_without_mirror_or_glass_traces_no_photons(diffuse) -> None:
     result = render(diffuse, options(spp=2))
     plan = result.stats["plan"]

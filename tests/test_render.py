@@ -14,9 +14,18 @@ from dpm import load_scene
 from dpm.cli import render_main
 from dpm.denoise import guides
 from dpm.density import PM
+from dpm.density.base import luminance
 from dpm.io import read_exr
 from dpm.render import RenderOptions, render
-from dpm.tracer import build_bvh, shade, trace_photons, trace_pixels, trace_visible_points
+from dpm.tracer import (
+    build_bvh,
+    shade,
+    trace_listed,
+    trace_photons,
+    trace_pixels,
+    trace_visible_points,
+)
+from dpm.tracer import path as path_module
 
 EXAMPLES = Path(__file__).parent.parent / "examples" / "scenes"
 
@@ -86,6 +95,25 @@ def test_whole_pixel_tracing_equals_visible_points_then_shading() -> None:
             np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
         assert (hits, bad) == (int(points.hit.sum()), dropped) and 0 < hits < len(points)
         assert image.max() > 0 and (albedo > 0).any()
+
+
+def test_listed_pixels_trace_the_same_paths_as_whole_pixels(monkeypatch) -> None:
+    # Adaptive sampling's extra paths (trace_listed) at every pixel of some rows, spp each,
+    # are pt-nocaustic's paths of those pixels: the same sums, and the squared luminances of
+    # the very samples that visible points then shading give; also when a pixel's paths are
+    # split over several tasks (here 3 + 1).
+    monkeypatch.setattr(path_module, "PATHS_PER_TASK", 3)
+    scene = load_scene(EXAMPLES / "glass_egg.obj")
+    bvh, camera, spp = build_bvh(scene), scene.camera.with_resolution(24, 20), 4
+    image = trace_pixels(scene, bvh, camera, spp, 5, (3, 17), False)[0]
+    pixels = np.arange(3 * 24, 17 * 24)
+    sums, squares, bad = trace_listed(scene, bvh, camera, pixels, np.full(len(pixels), spp), 5)
+    np.testing.assert_allclose(sums / spp, image.reshape(-1, 3), rtol=1e-5, atol=1e-6)
+    points = trace_visible_points(scene, bvh, camera, spp, 5, (3, 17))
+    reflected, dropped = shade(scene, bvh, points, 5, False)
+    lum = luminance((points.emitted + points.throughput * reflected).astype(np.float64))
+    np.testing.assert_allclose(squares, (lum**2).reshape(-1, spp).sum(axis=1), rtol=1e-4)
+    assert bad == dropped and squares.max() > 0
 
 
 def test_caustic_component_is_the_estimate_times_the_camera_throughput() -> None:

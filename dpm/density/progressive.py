@@ -31,9 +31,10 @@ ALPHA = 0.7  # fraction of new photons kept each pass (the paper's and Hachisuka
 CHECKPOINT_SECONDS = 30.0  # a run writes its statistics at most this often (and at the end)
 
 
-def pass_seed(seed: int, j: int) -> int:
-    """The seed of pass j (camera samples, a reference's half): independent of every other's."""
-    return int(np.random.SeedSequence([seed, j]).generate_state(1)[0])
+def pass_seed(seed: int, j: int, part: int = 0) -> int:
+    """The seed of pass j (camera samples, a reference's half), or of another `part` of it
+    (e.g. its extra paths): independent of every other's."""
+    return int(np.random.SeedSequence([seed, j, *([part] if part else [])]).generate_state(1)[0])
 
 
 def estimate_in_passes(

@@ -34,6 +34,7 @@ from dpm.denoise import denoise, guides
 from dpm.density.ppm import ALPHA, PPMState, check_progressive
 from dpm.density.progressive import pass_seed
 from dpm.errors import InputError
+from dpm.methods.adaptive import ADAPT_AFTER, EXTRA_CAP, EXTRA_PER_PIXEL, Halves
 from dpm.methods.base import Method, check_photons
 from dpm.methods.sppm import sppm_gather
 from dpm.options import RenderOptions
@@ -43,6 +44,7 @@ from dpm.tracer import (
     BVH,
     VisiblePoints,
     shade,
+    trace_listed,
     trace_photons,
     trace_pixels,
     trace_visible_points,
@@ -144,7 +146,8 @@ class Auto(Method):
         pixels = w * h
         full = o.component == "full"
         state = PPMState.start(pixels, o.radius or 1.0, ALPHA)  # radii set at the first pass
-        path_sum = np.zeros((pixels, 3), np.float64)
+        paths = Halves(h, w)
+        extra_paths = 0
         albedo, normal = np.zeros((pixels, 3), np.float64), np.zeros((pixels, 3), np.float64)
         deadline = None if o.time is None else started + o.time
         finish = FINISH_SECONDS + FINISH_SECONDS_PER_PIXEL * pixels * (full and o.denoised)
@@ -171,7 +174,8 @@ class Auto(Method):
                 # no caustic estimate: whole pixels in one kernel, no visible points kept
                 with watch("path"):
                     part, a, n, _, bad = trace_pixels(scene, bvh, camera, 1, seed, (0, h), False)
-                path_sum += part.reshape(pixels, 3)
+                paths.add_pass(j % 2, part.reshape(pixels, 3))
+                grid = None
                 albedo += a.reshape(pixels, 3)
                 normal += n.reshape(pixels, 3)
                 dropped += bad
@@ -183,7 +187,7 @@ class Auto(Method):
                         state.radius = footprint_radius(points, camera)
                     grid_radius = GRID_RADII * float(np.median(state.radius))
                 n_paths = first_photons if plan is None else plan.photons_per_pass
-                photons = None
+                photons = grid = None
                 if n_paths and (plan is None or plan.caustics != "off"):
                     with watch("photons"):
                         photons = trace_photons(
@@ -193,15 +197,25 @@ class Auto(Method):
                     with watch("shade"):
                         grid = None if photons is None else photon_grid(photons, grid_radius)
                         reflected, bad = shade(scene, bvh, points, seed, False, grid)
-                        path_sum += points.emitted + points.throughput * reflected
+                        paths.add_pass(j % 2, points.emitted + points.throughput * reflected)
                     dropped += bad
                     a, n = guides(points)
                     albedo += a
                     normal += n
                 if photons is not None:
                     sppm_gather(state, points, photons, watch)
+            if full and j >= ADAPT_AFTER:
+                with watch("adaptive"):
+                    budget = round(EXTRA_PER_PIXEL * pixels)
+                    extra, counts = paths.plan_extra(j % 2, budget, EXTRA_CAP)
+                    sums, squares, bad = trace_listed(
+                        scene, bvh, camera, extra, counts, pass_seed(o.seed, j, 1), grid
+                    )
+                    paths.extra[j % 2].add(extra, counts, sums, squares)
+                    extra_paths += int(counts.sum())
+                    dropped += bad
             if plan is None:
-                path_light = float(path_sum.mean(axis=1).sum()) if full else 0.0
+                path_light = float(paths.mean().mean(axis=1).sum()) if full else 0.0
                 caustic_light = float(state.irradiance().mean(axis=1).sum())
                 plan = make_plan(scene, pixels, path_light, caustic_light, given, why)
             j += 1
@@ -216,11 +230,11 @@ class Auto(Method):
                 break
         bar.close()
         self.passes, self.plan, self.caustic_photons = j, plan, state.photons
-        self.dropped = dropped
+        self.dropped, self.extra_paths = dropped, extra_paths
         caustic = state.irradiance().astype(np.float32)  # weighted by throughput · ρ/π
         if not full:
             return caustic.reshape(h, w, 3), self.stats()
-        image = (path_sum / j).astype(np.float32).reshape(h, w, 3)
+        image = paths.mean().astype(np.float32).reshape(h, w, 3)
         if o.denoised:
             with watch("denoise"):
                 image = denoise(image, (albedo / j).reshape(h, w, 3), (normal / j).reshape(h, w, 3))
@@ -231,4 +245,5 @@ class Auto(Method):
         return {
             "passes": self.passes, "plan": self.plan.as_dict(), "spp": self.passes,
             "caustic_photons": self.caustic_photons, "nonfinite_samples": self.dropped,
+            "extra_paths": self.extra_paths,
         }  # fmt: skip

@@ -31,6 +31,8 @@ RR_START = 3  # vertices before Russian roulette may end a path
 RR_SURVIVAL = 0.95  # the most likely survival of Russian roulette at a diffuse vertex
 DIMS_PER_VERTEX = 8  # Fresnel, light pick, light point (2), direction (2), roulette, spare
 SAMPLES_PER_TASK = 64
+PATHS_PER_TASK = 1024  # the most camera paths of one pixel in one task of `trace_listed`
+LUMINANCE = (0.2126, 0.7152, 0.0722)  # Rec. 709 weights of a path's variance
 SCATTER = 2**31 - 1  # a prime above any task count: i -> i·SCATTER mod n is a permutation
 
 
@@ -220,25 +222,27 @@ def shade(
 
 
 @nb.njit(cache=True, _nrt=False, error_model="numpy")
-def path_pixel(bvh, sc, cam, width, height, pix, spp, seed, eps, caustics, stack):
-    """Sums over the spp camera paths of pixel pix (row-major index): (radiance r, g, b,
-    denoiser albedo r, g, b and normal x, y, z, visible points found, non-finite samples)."""
+def path_pixel(
+    bvh, sc, cam, width, height, pix, first, spp, stride, seed, eps, caustics, grid, stack
+):  # fmt: skip
+    """Sums over spp camera paths of pixel pix (row-major index), random streams pix·stride
+    + first … first+spp-1: (radiance r, g, b, denoiser albedo r, g, b and normal x, y, z,
+    visible points found, non-finite samples, sum of each path's squared luminance)."""
     y, x = pix // width, pix % width
-    sr = sg = sb = gr = gg = gb = hx = hy = hz = 0.0
+    sr = sg = sb = gr = gg = gb = hx = hy = hz = sq = 0.0
     hits = bad = 0
     for s in range(spp):
-        stream = pix * spp + s
+        stream = pix * stride + first + s
         v = camera_sample(bvh, sc, cam, width, height, x, y, stream, seed, eps, stack)
         er, eg, eb = v[13], v[14], v[15]
-        sr, sg, sb = sr + er, sg + eg, sb + eb
         if v[0]:
             hits += 1
             r, g, b = shade_path(
-                bvh, sc, seed, stream, eps, caustics, None, stack,
+                bvh, sc, seed, stream, eps, caustics, grid, stack,
                 v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], v[9],
             )  # fmt: skip
             if math.isfinite(r) and math.isfinite(g) and math.isfinite(b):
-                sr, sg, sb = sr + v[10] * r, sg + v[11] * g, sb + v[12] * b
+                er, eg, eb = er + v[10] * r, eg + v[11] * g, eb + v[12] * b
             else:  # as `shade`: the sample's reflected light counts as zero
                 bad += 1
             gr += min(max(v[7] * v[10], 0.0), 1.0)
@@ -249,7 +253,10 @@ def path_pixel(bvh, sc, cam, width, height, pix, spp, seed, eps, caustics, stack
             peak = max(er, eg, eb)
             if peak > 0:  # a light seen directly: its normalised colour
                 gr, gg, gb = gr + er / peak, gg + eg / peak, gb + eb / peak
-    return sr, sg, sb, gr, gg, gb, hx, hy, hz, hits, bad
+        sr, sg, sb = sr + er, sg + eg, sb + eb
+        lum = LUMINANCE[0] * er + LUMINANCE[1] * eg + LUMINANCE[2] * eb
+        sq += lum * lum
+    return sr, sg, sb, gr, gg, gb, hx, hy, hz, hits, bad, sq
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
@@ -272,8 +279,9 @@ def pixels_kernel(
         stack = new_stack(depth)
         for p in range(task * per_task, min(n, (task + 1) * per_task)):
             v = path_pixel(
-                bvh, sc, cam, width, height, row0 * width + p, spp, seed, eps, caustics, stack
-            )
+                bvh, sc, cam, width, height, row0 * width + p, 0, spp, spp, seed, eps,
+                caustics, None, stack,
+            )  # fmt: skip
             image[p, 0], image[p, 1], image[p, 2] = v[0] / spp, v[1] / spp, v[2] / spp
             albedo[p, 0], albedo[p, 1], albedo[p, 2] = v[3] / spp, v[4] / spp, v[5] / spp
             normal[p, 0], normal[p, 1], normal[p, 2] = v[6] / spp, v[7] / spp, v[8] / spp
@@ -305,3 +313,59 @@ def trace_pixels(
     )  # fmt: skip
     out = tuple(a.astype(np.float32).reshape(shape) for a in (image, albedo, normal))
     return (*out, int(hits), int(bad))
+
+
+@nb.njit(cache=True, parallel=True, error_model="numpy")
+def listed_kernel(
+    bvh, depth, sc, cam, width, height, pixels, first, counts, stride, seed, eps, grid, out, sq
+):  # fmt: skip
+    """Per listed task: the radiance sums (L, 3) of counts[i] camera paths of pixels[i]
+    (streams pixel·stride + first[i] + 0 … counts[i]-1) into out, their squared luminances'
+    sum into sq; returns the non-finite samples dropped."""
+    bad = np.zeros(len(pixels), np.int64)
+    for i in nb.prange(len(pixels)):
+        stack = new_stack(depth)
+        v = path_pixel(
+            bvh, sc, cam, width, height, pixels[i], first[i], counts[i], stride, seed, eps,
+            False, grid, stack,
+        )  # fmt: skip
+        out[i, 0], out[i, 1], out[i, 2], sq[i], bad[i] = v[0], v[1], v[2], v[11], v[10]
+    return bad.sum()
+
+
+def trace_listed(
+    scene: Scene,
+    bvh: BVH,
+    camera: Camera,
+    pixels: np.ndarray,
+    counts: np.ndarray,
+    seed: int,
+    grid: PhotonGrid | None = None,
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """More camera paths at some pixels, as pt-nocaustic (or `auto`'s paths with a photon
+    grid) would trace them: pixels (L,) row-major indices, counts (L,) paths each. Returns the
+    radiance sums (L, 3) float64, the sums of each path's squared luminance (L,) float64 and
+    the non-finite samples dropped. Streams are pixel·max(counts) + 0 … counts-1, so a seed
+    not used for the pixels' other paths gives independent samples."""
+    pixels = np.asarray(pixels, np.int64)
+    counts = np.asarray(counts, np.int64)
+    out = np.zeros((len(pixels), 3))
+    sq = np.zeros(len(pixels))
+    if len(pixels) == 0:
+        return out, sq, 0
+    # Tasks of at most PATHS_PER_TASK paths, so that one pixel given many cannot hold a thread
+    # while the others idle.
+    pieces = -(-counts // PATHS_PER_TASK)
+    owner = np.repeat(np.arange(len(pixels)), pieces)
+    first = np.arange(len(owner)) - np.repeat(np.cumsum(pieces) - pieces, pieces)
+    first = first * PATHS_PER_TASK
+    task_counts = np.minimum(counts[owner] - first, PATHS_PER_TASK)
+    task_out, task_sq = np.zeros((len(owner), 3)), np.zeros(len(owner))
+    bad = listed_kernel(
+        bvh.arrays, bvh.depth, scene.kernel_arrays(), camera.basis(), camera.width,
+        camera.height, pixels[owner], first, task_counts, int(counts.max()), seed,
+        spawn_offset(scene), grid, task_out, task_sq,
+    )  # fmt: skip
+    np.add.at(out, owner, task_out)
+    np.add.at(sq, owner, task_sq)
+    return out, sq, int(bad)
