@@ -7,7 +7,9 @@ better. The pass's photons also give the caustic light at the path's later diffu
 (a density estimate from a hashed grid, in place of the BSDF-sampled paths that reach a light
 through glass or a mirror from there: the fireflies of light that a caustic throws onto a
 surface the camera sees by a diffuse bounce); its radius shrinks pass by pass as in
-probabilistic PPM (Knaus & Zwicker 2011), so that estimate is consistent too.
+probabilistic PPM (Knaus & Zwicker 2011), so that estimate is consistent too. After a few
+passes, each pass also spends extra camera paths where pixels vary most (adaptive sampling,
+`dpm.methods.adaptive`, cross-fitted so the image stays unbiased).
 `--time` renders passes until the budget (counted from the process start) would be overrun;
 without it `--spp` passes are rendered with `--photons` paths in all.
 
