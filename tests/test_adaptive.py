@@ -51,11 +51,11 @@ def test_cross_fitted_halves_keep_the_image_unbiased() -> None:
             own.base[1] = own.base[0]
             extra, counts = own.plan_extra(0, BUDGET, CAP)
             own.extra[0].add(extra, counts, *sums(rng, counts))
-    n = halves.count(0) + halves.count(1)
+    n = halves.half(0).count + halves.half(1).count
     assert n.sum() > PASSES * pixels * 1.15  # extra paths were spent
     stderr = np.sqrt((BRIGHT - 1) / np.mean(n) / pixels) * 1.5  # halves weigh evenly: a bit more
     unbiased = halves.mean()[:, 0].mean()
     assert abs(unbiased - 1.0) < 3 * stderr
-    counts0 = own.count(0)
+    counts0 = own.half(0).count
     biased = (own.base[0].radiance[:, 0] + own.extra[0].radiance[:, 0]) / counts0
     assert biased.mean() < 1.0 - 5 * stderr

@@ -8,6 +8,7 @@ import numpy as np
 
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap, VisiblePoints
+from dpm.tracer.path import LUMINANCE
 
 
 class Estimator(Protocol):
@@ -30,7 +31,7 @@ def reflected(albedo: np.ndarray, irradiance: np.ndarray) -> np.ndarray:
 
 def luminance(rgb: np.ndarray) -> np.ndarray:
     """(…) Rec. 709 luminance of linear RGB (…, 3)."""
-    return rgb @ np.array([0.2126, 0.7152, 0.0722])
+    return rgb @ np.array(LUMINANCE)
 
 
 def tangent_frame(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -91,9 +91,12 @@ class Halves:
         radiance = radiance.astype(np.float64)
         self.base[half].add(slice(None), 1, radiance, luminance(radiance) ** 2)
 
-    def count(self, half: int) -> np.ndarray:
-        """(P,) float64 paths of a half."""
-        return self.base[half].count + self.extra[half].count
+    def half(self, h: int) -> PixelPaths:
+        """All paths of half h (its one-per-pass and its extra ones)."""
+        base, extra = self.base[h], self.extra[h]
+        return PixelPaths(
+            base.count + extra.count, base.radiance + extra.radiance, base.square + extra.square
+        )
 
     def plan_extra(self, half: int, budget: int, cap: int) -> tuple[np.ndarray, np.ndarray]:
         """Pixels (L,) and extra paths (L,) for `half`, placed by the other half's deviations
@@ -102,31 +105,18 @@ class Halves:
         var = self.base[1 - half].deviation() ** 2
         near = uniform_filter(var.reshape(self.height, self.width), SMOOTH, mode="nearest")
         sigma = np.sqrt(np.maximum(var, near.ravel()))
-        return neyman(sigma, self.count(half), budget, cap)
+        return neyman(sigma, self.half(half).count, budget, cap)
 
     def mean(self) -> np.ndarray:
         """(P, 3) float64 radiance per pixel: the mean of its halves' means (a half without
         paths: the other's)."""
-        means, counts = [], []
-        for h in range(2):
-            n = self.count(h)
-            means.append(
-                (self.base[h].radiance + self.extra[h].radiance) / np.maximum(n, 1)[:, None]
-            )
-            counts.append(n)
-        both = (counts[0] > 0) & (counts[1] > 0)
-        return np.where(
-            both[:, None],
-            (means[0] + means[1]) / 2,
-            np.where((counts[0] > 0)[:, None], means[0], means[1]),
-        )
+        a, b = self.half(0), self.half(1)
+        mean_a = a.radiance / np.maximum(a.count, 1)[:, None]
+        mean_b = b.radiance / np.maximum(b.count, 1)[:, None]
+        one = np.where((b.count > 0)[:, None], mean_b, mean_a)
+        return np.where(((a.count > 0) & (b.count > 0))[:, None], (mean_a + mean_b) / 2, one)
 
     def noise(self) -> float:
         """Expected RMSE of the pixels' luminance, from each half's deviations and paths."""
-        var = []
-        for h in range(2):
-            n = self.count(h)
-            both = PixelPaths(n, self.base[h].radiance + self.extra[h].radiance,
-                              self.base[h].square + self.extra[h].square)  # fmt: skip
-            var.append(both.deviation() ** 2 / np.maximum(n, 1))
+        var = [p.deviation() ** 2 / np.maximum(p.count, 1) for p in map(self.half, (0, 1))]
         return float(np.sqrt(np.mean((var[0] + var[1]) / 4)))

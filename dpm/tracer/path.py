@@ -32,7 +32,7 @@ RR_SURVIVAL = 0.95  # the most likely survival of Russian roulette at a diffuse 
 DIMS_PER_VERTEX = 8  # Fresnel, light pick, light point (2), direction (2), roulette, spare
 SAMPLES_PER_TASK = 64
 PATHS_PER_TASK = 1024  # the most camera paths of one pixel in one task of `trace_listed`
-LUMINANCE = (0.2126, 0.7152, 0.0722)  # Rec. 709 weights of a path's variance
+LUMINANCE = (0.2126, 0.7152, 0.0722)  # Rec. 709 weights (dpm.density.base.luminance too)
 SCATTER = 2**31 - 1  # a prime above any task count: i -> i·SCATTER mod n is a permutation
 
 
