@@ -5,7 +5,9 @@ the pixel, dimension 2 + 2i decides the Fresnel event at specular vertex i and 3
 roulette there (from vertex RR_SPECULAR on, only where absorption has lowered the weight:
 see `specular_survival`; a path trapped in clear glass ends at MAX_SPECULAR_DEPTH). Every method
 starts from these same points, so the same seed gives the same visible points whatever the
-method; path tracing from them uses dimensions from SHADE_DIM0 on.
+method; path tracing from them uses dimensions from SHADE_DIM0 on. At a dielectric the light
+both Fresnel branches see next counts, weighted, on every path (emission splitting, in
+`camera_sample`), so the emitted radiance is not the chosen branch's alone; the points are.
 """
 
 from __future__ import annotations
@@ -17,16 +19,43 @@ import numba as nb
 import numpy as np
 
 from dpm.camera import Camera
-from dpm.scene import DIFFUSE, Scene
-from dpm.tracer.bsdf import scatter_specular, specular_survival
+from dpm.scene import DIELECTRIC, DIFFUSE, Scene
+from dpm.tracer.bsdf import (
+    fresnel_dielectric,
+    reflect,
+    refract,
+    scatter_specular,
+    specular_survival,
+)
 from dpm.tracer.bvh import BVH
 from dpm.tracer.sampling import uniform
 from dpm.tracer.surface import next_surface
-from dpm.tracer.traverse import new_stack, spawn_offset
+from dpm.tracer.traverse import hit_triangle, new_stack, ray_setup, spawn_offset
 
 MAX_SPECULAR_DEPTH = 256  # specular vertices a camera path may pass before it is dropped
 RR_SPECULAR = 16  # specular vertices before Russian roulette may end a path (also for photons)
 SHADE_DIM0 = 2 + 2 * MAX_SPECULAR_DEPTH
+
+
+_NO_HIT = (-1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0.0, False)  # `next_surface`'s miss
+LIGHT_TEST_TRIANGLES = 16  # lights with more triangles are found by tracing, not one by one
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _may_meet_light(sc, ox, oy, oz, dx, dy, dz):
+    """Whether the ray o + t·d (t > 0) meets the front face of an emitter triangle, tested
+    against each one (the watertight test the BVH's leaves use, so a light the traced ray
+    would hit is never missed); True without testing when the lights have many triangles."""
+    if len(sc.emitter_triangles) > LIGHT_TEST_TRIANGLES:
+        return True
+    kx, ky, kz, sx, sy, sz = ray_setup(dx, dy, dz)
+    rows = sc.triangles.reshape((sc.triangles.shape[0], 9))  # hit_triangle's (T, 9) rows
+    for e in sc.emitter_triangles:
+        n = sc.normals[e]
+        if dx * n[0] + dy * n[1] + dz * n[2] < 0:
+            if hit_triangle(rows, e, ox, oy, oz, kx, ky, kz, sx, sy, sz, np.inf) < np.inf:
+                return True
+    return False
 
 
 @dataclass(frozen=True)
@@ -66,16 +95,16 @@ def camera_sample(bvh, sc, cam, width, height, x, y, stream, seed, eps, stack):
     dz = cam[1, 2] + fx * cam[2, 2] + fy * cam[3, 2]
     inv_len = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
     dx, dy, dz = dx * inv_len, dy * inv_len, dz * inv_len
-    ox, oy, oz = cam[0, 0], cam[0, 1], cam[0, 2]
+    tri, _, px, py, pz, nx, ny, nz, m, cos_i, front = next_surface(
+        bvh, sc, cam[0, 0], cam[0, 1], cam[0, 2], dx, dy, dz, stack
+    )
     tr = tg = tb = 1.0
     er = eg = eb = 0.0
+    counted = False  # whether this hit's emission is already in e (a dielectric's split)
     for vertex in range(MAX_SPECULAR_DEPTH + 1):
-        tri, _, px, py, pz, nx, ny, nz, m, cos_i, front = next_surface(
-            bvh, sc, ox, oy, oz, dx, dy, dz, stack
-        )
         if tri < 0:
             break
-        if front:  # emitters radiate from the front face only
+        if front and not counted:  # emitters radiate from the front face only
             er += tr * sc.emission[m, 0]
             eg += tg * sc.emission[m, 1]
             eb += tb * sc.emission[m, 2]
@@ -93,11 +122,54 @@ def camera_sample(bvh, sc, cam, width, height, x, y, stream, seed, eps, stack):
                 break
             tr, tg, tb = tr / q, tg / q, tb / q
         u = uniform(seed, stream, 2 + 2 * vertex)
-        dx, dy, dz, wr, wg, wb, side = scatter_specular(
-            sc, m, dx, dy, dz, nx, ny, nz, cos_i, front, u, True
-        )
-        tr, tg, tb = tr * wr, tg * wg, tb * wb
-        ox, oy, oz = px + side * eps * nx, py + side * eps * ny, pz + side * eps * nz
+        if sc.kind[m] != DIELECTRIC:
+            dx, dy, dz, wr, wg, wb, side = scatter_specular(
+                sc, m, dx, dy, dz, nx, ny, nz, cos_i, front, u, True
+            )
+            tr, tg, tb = tr * wr, tg * wg, tb * wb
+            ox, oy, oz = px + side * eps * nx, py + side * eps * ny, pz + side * eps * nz
+            tri, _, px, py, pz, nx, ny, nz, m, cos_i, front = next_surface(
+                bvh, sc, ox, oy, oz, dx, dy, dz, stack
+            )
+            counted = False
+            continue
+        # Emission splitting: the light each Fresnel branch sees at its next surface counts
+        # with the branch's weight (F, or (1 - F)·Tf/η²) on every path, and the path goes on
+        # along one branch, chosen as before. A small light seen in water or glass is
+        # otherwise found by a few paths in a hundred: the fireflies that dominate those
+        # scenes' error. The branch not taken is traced only if it can meet a light.
+        eta = sc.ior[m] if front else 1.0 / sc.ior[m]
+        f, cos_t = fresnel_dielectric(cos_i, eta)
+        tf = sc.transmittance[m]
+        scale = 1.0 / (eta * eta)  # radiance / η² is conserved
+        wr, wg, wb = tf[0] * scale, tf[1] * scale, tf[2] * scale
+        reflected = u < f
+        rx, ry, rz = reflect(dx, dy, dz, nx, ny, nz)
+        ox, oy, oz = px + eps * nx, py + eps * ny, pz + eps * nz
+        hit_r = _NO_HIT
+        if reflected or _may_meet_light(sc, ox, oy, oz, rx, ry, rz):
+            hit_r = next_surface(bvh, sc, ox, oy, oz, rx, ry, rz, stack)
+            if hit_r[0] >= 0 and hit_r[10]:
+                er += tr * f * sc.emission[hit_r[8], 0]
+                eg += tg * f * sc.emission[hit_r[8], 1]
+                eb += tb * f * sc.emission[hit_r[8], 2]
+        tx, ty, tz = refract(dx, dy, dz, nx, ny, nz, cos_i, cos_t, eta)
+        ox, oy, oz = px - eps * nx, py - eps * ny, pz - eps * nz
+        hit_t = _NO_HIT
+        if not reflected or (f < 1 and _may_meet_light(sc, ox, oy, oz, tx, ty, tz)):
+            hit_t = next_surface(bvh, sc, ox, oy, oz, tx, ty, tz, stack)
+            if hit_t[0] >= 0 and hit_t[10]:
+                er += tr * wr * (1.0 - f) * sc.emission[hit_t[8], 0]
+                eg += tg * wg * (1.0 - f) * sc.emission[hit_t[8], 1]
+                eb += tb * wb * (1.0 - f) * sc.emission[hit_t[8], 2]
+        if reflected:
+            dx, dy, dz = rx, ry, rz
+            tri, _, px, py, pz, nx, ny, nz, m, cos_i, front = hit_r
+        else:
+            dx, dy, dz = tx, ty, tz
+            tr, tg, tb = tr * wr, tg * wg, tb * wb
+            tri, _, px, py, pz, nx, ny, nz, m, cos_i, front = hit_t
+        counted = True
     z = 0.0
     return False, z, z, z, z, z, z, z, z, z, z, z, z, er, eg, eb
 
