@@ -8,8 +8,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from dpm.density.base import luminance
 from dpm.errors import InputError
 from dpm.tracer.visible import VisiblePoints
+
+RESTORE_Z = 2.0  # standard errors of a pixel's mean the denoiser may move it before undone
 
 
 def denoise(color: np.ndarray, albedo: np.ndarray, normal: np.ndarray) -> np.ndarray:
@@ -28,6 +31,19 @@ def denoise(color: np.ndarray, albedo: np.ndarray, normal: np.ndarray) -> np.nda
     images = [np.ascontiguousarray(np.nan_to_num(a), np.float32) for a in (color, albedo, normal)]
     images[0] = np.maximum(images[0], 0.0)  # HDR input must be non-negative
     return pyoidn.denoise(*images, hdr=True, quality="high")
+
+
+def restore_certain(
+    color: np.ndarray, denoised: np.ndarray, error: np.ndarray, z: float = RESTORE_Z
+) -> np.ndarray:
+    """(H, W, 3) float32: `denoised`, except where it moved a pixel's luminance by more than
+    z standard errors `error` (H, W) of the pixel's own mean: there the render's `color`
+    (blended in between z and 2z). The denoiser takes a glint that every path of a pixel
+    sees (a small light in water) for a firefly and wipes it; a pixel that well known needs
+    no denoising."""
+    shift = np.abs(luminance(denoised) - luminance(color)) / np.maximum(error, 1e-30)
+    keep = np.clip(shift / z - 1.0, 0.0, 1.0)[..., None]
+    return (denoised + keep * (color - denoised)).astype(np.float32)
 
 
 def guides(points: VisiblePoints) -> tuple[np.ndarray, np.ndarray]:

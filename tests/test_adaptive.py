@@ -59,3 +59,17 @@ def test_cross_fitted_halves_keep_the_image_unbiased() -> None:
     counts0 = own.half(0).count
     biased = (own.base[0].radiance[:, 0] + own.extra[0].radiance[:, 0]) / counts0
     assert biased.mean() < 1.0 - 5 * stderr
+
+
+def test_standard_error_matches_the_spread_of_pixel_means() -> None:
+    # Pixels of PASSES rare-light paths each: the predicted error of a pixel's mean agrees
+    # with the spread of the means across pixels (all have the same distribution).
+    rng = np.random.default_rng(2)
+    halves = Halves(HEIGHT, WIDTH)
+    for j in range(PASSES):
+        halves.add_pass(j % 2, paths(rng, HEIGHT * WIDTH))
+    spread = halves.mean()[:, 0].std()
+    error = halves.standard_error()
+    # Pixels whose rare paths have not shown up borrow their neighbours' error: a little high.
+    assert 0.95 < np.mean(error) / spread < 1.25
+    assert error.min() > 0.5 * spread

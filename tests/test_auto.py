@@ -11,6 +11,7 @@ import pytest
 
 from conftest import FLOOR_AND_LIGHT_MTL, FLOOR_AND_LIGHT_OBJ, write_scene
 from dpm import load_scene
+from dpm.denoise import RESTORE_Z, restore_certain
 from dpm.io import KNEE, linear_to_srgb8, tone_map
 from dpm.methods import auto
 from dpm.render import RenderOptions, render
@@ -181,3 +182,19 @@ def test_bad_budgets_are_refused(glass) -> None:
             render(glass, options(time=bad))
     with pytest.raises(InputError, match="--time applies to auto only"):
         render(glass, RenderOptions(method="ppm", time=1.0, progress=False))
+
+
+def test_pixels_the_denoiser_moves_beyond_their_own_error_are_given_back() -> None:
+    # A glint every path of its pixel saw (30 ± 0.5) that the denoiser wiped comes back; a
+    # change within the pixel's error stays; halfway between z and 2z errors, half of each.
+    color = np.ones((4, 4, 3), np.float32)
+    color[0, 0] = 30.0
+    denoised = np.ones_like(color)
+    error = np.full((4, 4), 0.5)
+    denoised[1, 1] = 1.0 + 0.5 * RESTORE_Z * error[1, 1]  # within z errors
+    denoised[2, 2] = 1.0 + 1.5 * RESTORE_Z * error[2, 2]  # between z and 2z
+    out = restore_certain(color, denoised, error)
+    np.testing.assert_allclose(out[0, 0], 30.0)
+    np.testing.assert_allclose(out[1, 1], denoised[1, 1])
+    np.testing.assert_allclose(out[2, 2], (color[2, 2] + denoised[2, 2]) / 2, rtol=1e-6)
+    np.testing.assert_allclose(out[3, 3], 1.0)

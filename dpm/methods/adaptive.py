@@ -116,6 +116,15 @@ class Halves:
         one = np.where((b.count > 0)[:, None], mean_b, mean_a)
         return np.where(((a.count > 0) & (b.count > 0))[:, None], (mean_a + mean_b) / 2, one)
 
+    def standard_error(self) -> np.ndarray:
+        """(P,) float64 standard error of each pixel's luminance, from its halves' paths, or
+        its SMOOTH × SMOOTH neighbourhood's mean squared error where that is larger (a pixel
+        whose rare paths have not shown up yet knows no variance of its own)."""
+        var = [p.deviation() ** 2 / np.maximum(p.count, 1) for p in map(self.half, (0, 1))]
+        own = (var[0] + var[1]) / 4
+        near = uniform_filter(own.reshape(self.height, self.width), SMOOTH, mode="nearest")
+        return np.sqrt(np.maximum(own, near.ravel()))
+
     def noise(self) -> float:
         """Expected RMSE of the pixels' luminance, from each half's deviations and paths."""
         var = [p.deviation() ** 2 / np.maximum(p.count, 1) for p in map(self.half, (0, 1))]

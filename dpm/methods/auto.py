@@ -32,7 +32,7 @@ import numpy as np
 from tqdm import tqdm
 
 from dpm.camera import Camera
-from dpm.denoise import denoise, guides
+from dpm.denoise import denoise, guides, restore_certain
 from dpm.density.ppm import ALPHA, PPMState, check_progressive
 from dpm.density.progressive import pass_seed
 from dpm.errors import InputError
@@ -239,7 +239,9 @@ class Auto(Method):
         image = paths.mean().astype(np.float32).reshape(h, w, 3)
         if o.denoised:
             with watch("denoise"):
-                image = denoise(image, (albedo / j).reshape(h, w, 3), (normal / j).reshape(h, w, 3))
+                guide = (albedo / j).reshape(h, w, 3), (normal / j).reshape(h, w, 3)
+                error = paths.standard_error().reshape(h, w)
+                image = restore_certain(image, denoise(image, *guide), error)
         return image + caustic.reshape(h, w, 3), self.stats()
 
     def stats(self) -> dict[str, Any]:
