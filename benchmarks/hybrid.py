@@ -39,7 +39,7 @@ from dpm.camera import Camera
 from dpm.denoise import denoise
 from dpm.density.progressive import pass_seed
 from dpm.density.reference import ppm_reference
-from dpm.io import linear_to_srgb8, read_exr, write_image
+from dpm.io import linear_to_srgb8, read_exr, write_image, write_json
 from dpm.methods.adaptive import Halves
 from dpm.metrics import rmse
 from dpm.render import RenderOptions, render
@@ -96,7 +96,8 @@ def nocaustic_reference(scene: Scene, camera: Camera) -> tuple[np.ndarray, float
 
 
 def reference(scene: Scene, camera: Camera, name: str, path: Path | None = None) -> np.ndarray:
-    """The long reference image (H, W, 3), cached as an EXR at `path` (default: OUT)."""
+    """The long reference image (H, W, 3), cached as an EXR at `path` (default: OUT), with
+    its expected RMSE (path and caustic parts, luminance) in a JSON file beside it."""
     path = path or OUT / f"{name}-reference.exr"
     if path.exists():
         return read_exr(path)
@@ -105,6 +106,7 @@ def reference(scene: Scene, camera: Camera, name: str, path: Path | None = None)
     print(name, f"reference noise: paths {path_noise:.5f}, caustics {noise:.5f}", flush=True)
     image = nocaustic + caustic
     write_image(path, image)
+    write_json(path.with_suffix(".json"), {"path_noise": path_noise, "caustic_noise": noise})
     return image
 
 
