@@ -102,9 +102,7 @@ class Halves:
         """Pixels (L,) and extra paths (L,) for `half`, placed by the other half's deviations
         (each pixel's, or its SMOOTH × SMOOTH neighbourhood's where that is larger: a rare
         path's neighbours see it as rarely, and together they tell its variance sooner)."""
-        var = self.base[1 - half].deviation() ** 2
-        near = uniform_filter(var.reshape(self.height, self.width), SMOOTH, mode="nearest")
-        sigma = np.sqrt(np.maximum(var, near.ravel()))
+        sigma = np.sqrt(self._or_neighbourhood(self.base[1 - half].deviation() ** 2))
         return neyman(sigma, self.half(half).count, budget, cap)
 
     def mean(self) -> np.ndarray:
@@ -120,12 +118,18 @@ class Halves:
         """(P,) float64 standard error of each pixel's luminance, from its halves' paths, or
         its SMOOTH × SMOOTH neighbourhood's mean squared error where that is larger (a pixel
         whose rare paths have not shown up yet knows no variance of its own)."""
-        var = [p.deviation() ** 2 / np.maximum(p.count, 1) for p in map(self.half, (0, 1))]
-        own = (var[0] + var[1]) / 4
-        near = uniform_filter(own.reshape(self.height, self.width), SMOOTH, mode="nearest")
-        return np.sqrt(np.maximum(own, near.ravel()))
+        return np.sqrt(self._or_neighbourhood(self._variance()))
 
     def noise(self) -> float:
         """Expected RMSE of the pixels' luminance, from each half's deviations and paths."""
+        return float(np.sqrt(np.mean(self._variance())))
+
+    def _variance(self) -> np.ndarray:
+        """(P,) float64 variance of each pixel's luminance (the mean of its halves' means)."""
         var = [p.deviation() ** 2 / np.maximum(p.count, 1) for p in map(self.half, (0, 1))]
-        return float(np.sqrt(np.mean((var[0] + var[1]) / 4)))
+        return (var[0] + var[1]) / 4
+
+    def _or_neighbourhood(self, var: np.ndarray) -> np.ndarray:
+        """(P,) per-pixel values var (P,), or their SMOOTH × SMOOTH mean where that is larger."""
+        near = uniform_filter(var.reshape(self.height, self.width), SMOOTH, mode="nearest")
+        return np.maximum(var, near.ravel())
