@@ -57,3 +57,38 @@ def write_scene(
 def scene_path(tmp_path: Path) -> Path:
     """A valid floor-and-light scene on disk."""
     return write_scene(tmp_path)
+
+
+WATER, WATER_LE = 1.33, 10.0  # the water's ior, the lights' radiance
+
+
+def water_between_lights(folder: Path) -> Path:
+    """A water surface (one sheet, ior 1.33) between a red light above and a green one below,
+    both larger than anything the camera's reflected or refracted rays can miss."""
+    f, h = 50, 3
+    obj = f"""mtllib scene.mtl
+v {-f} 0 {-f}
+v {f} 0 {-f}
+v {f} 0 {f}
+v {-f} 0 {f}
+v {-f} {h} {-f}
+v {f} {h} {-f}
+v {f} {h} {f}
+v {-f} {h} {f}
+v {-f} {-h} {-f}
+v {f} {-h} {-f}
+v {f} {-h} {f}
+v {-f} {-h} {f}
+usemtl water
+f 1 4 3 2
+usemtl above
+f 5 6 7 8
+usemtl below
+f 9 12 11 10
+"""
+    le = WATER_LE
+    mtl = (
+        f"newmtl water\nillum 7\nNi {WATER}\nnewmtl above\nKe {le} 0 0\nnewmtl below\nKe 0 {le} 0\n"
+    )
+    toml = "[camera]\norigin = [0, 1, 2]\ntarget = [0, 0, 0]\nfov = 1\nwidth = 16\nheight = 16\n"
+    return write_scene(folder, obj, mtl, toml)

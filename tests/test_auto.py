@@ -2,19 +2,29 @@
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from analytic import fresnel
 
-from conftest import FLOOR_AND_LIGHT_MTL, FLOOR_AND_LIGHT_OBJ, write_scene
+from conftest import (
+    FLOOR_AND_LIGHT_MTL,
+    FLOOR_AND_LIGHT_OBJ,
+    WATER,
+    WATER_LE,
+    water_between_lights,
+    write_scene,
+)
 from dpm import load_scene
 from dpm.denoise import RESTORE_Z, restore_certain
 from dpm.io import KNEE, linear_to_srgb8, tone_map
 from dpm.methods import auto
 from dpm.render import RenderOptions, render
+from dpm.tracer import build_bvh, specular_pixels, trace_emitted
 
 # The floor and light of conftest, and a glass slab between them: caustics.
 GLASS_OBJ = (
@@ -161,6 +171,35 @@ def test_caustics_are_added_after_the_denoiser(glass, monkeypatch) -> None:
     assert caustic.max() > 0
     np.testing.assert_allclose(seen[0], nocaustic, atol=1e-6)
     np.testing.assert_allclose(full, seen[0] + caustic, atol=1e-6)
+
+
+def test_light_seen_in_glass_that_every_sample_finds_skips_the_denoiser(
+    tmp_path: Path, monkeypatch
+) -> None:
+    # Every pixel sees the water (its extra light samples are spent there), and every sample
+    # of a pixel sees both lights, weighted by Fresnel: that light is known exactly, so it is
+    # added after the denoiser. A denoiser that wiped everything leaves it whole.
+    scene = load_scene(water_between_lights(tmp_path))
+    camera = scene.camera
+    assert specular_pixels(scene, build_bvh(scene), camera).all()
+    f = fresnel(np.array(1 / math.sqrt(5)), WATER)  # the centre pixel's angle
+    centre = np.array([camera.height // 2 * camera.width + camera.width // 2])
+    sums, squares = trace_emitted(scene, build_bvh(scene), camera, centre, 64, 3)
+    expected = np.array([f * WATER_LE, (1 - f) * WATER_LE / WATER**2, 0])
+    np.testing.assert_allclose(sums[0] / 64, expected, rtol=0.005, atol=1e-9)  # F varies a little
+    luma = 0.2126 * expected[0] + 0.7152 * expected[1]
+    assert squares[0] / 64 == pytest.approx(luma**2, rel=0.005)  # no spread: known exactly
+    seen = []
+
+    def wipe(color, albedo, normal):
+        seen.append(color.copy())
+        return np.zeros_like(color)
+
+    monkeypatch.setattr(auto, "denoise", wipe)
+    image = render(scene, options(spp=3, seed=1)).image
+    assert seen and not seen[0].any()  # the denoiser saw none of the light
+    assert image[..., 0].mean() == pytest.approx(expected[0], rel=0.02)
+    assert image[..., 1].mean() == pytest.approx(expected[1], rel=0.002)
 
 
 def test_the_tone_map_keeps_shadows_and_never_clips_highlights() -> None:

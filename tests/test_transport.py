@@ -17,7 +17,7 @@ import trimesh
 from analytic import fresnel
 from scipy.spatial import cKDTree
 
-from conftest import FLOOR_AND_LIGHT_MTL, write_scene
+from conftest import FLOOR_AND_LIGHT_MTL, WATER, WATER_LE, water_between_lights, write_scene
 from dpm import load_scene
 from dpm.render import RenderOptions, render
 from dpm.tracer import build_bvh, shade, trace_photons, trace_visible_points
@@ -321,40 +321,6 @@ def test_hard_light_paths_stay_finite(tmp_path: Path) -> None:
         assert result.stats["nonfinite_samples"] == 0
 
 
-def water_between_lights(folder: Path) -> Path:
-    """A water surface (one sheet, ior 1.33) between a red light above and a green one below,
-    both larger than anything the camera's reflected or refracted rays can miss."""
-    f, h = 50, 3
-    obj = f"""mtllib scene.mtl
-v {-f} 0 {-f}
-v {f} 0 {-f}
-v {f} 0 {f}
-v {-f} 0 {f}
-v {-f} {h} {-f}
-v {f} {h} {-f}
-v {f} {h} {f}
-v {-f} {h} {f}
-v {-f} {-h} {-f}
-v {f} {-h} {-f}
-v {f} {-h} {f}
-v {-f} {-h} {f}
-usemtl water
-f 1 4 3 2
-usemtl above
-f 5 6 7 8
-usemtl below
-f 9 12 11 10
-"""
-    mtl = (
-        f"newmtl water\nillum 7\nNi {WATER}\nnewmtl above\nKe {LE} 0 0\nnewmtl below\nKe 0 {LE} 0\n"
-    )
-    toml = "[camera]\norigin = [0, 1, 2]\ntarget = [0, 0, 0]\nfov = 1\nwidth = 16\nheight = 16\n"
-    return write_scene(folder, obj, mtl, toml)
-
-
-WATER = 1.33
-
-
 def test_light_seen_in_water_counts_with_its_fresnel_weight_on_every_path(tmp_path: Path) -> None:
     # Seen at 63.4° from the normal, the water reflects F ≈ 7.6 % of the red light above and
     # passes the rest of the green one below (radiance ÷ η² on the way out). Each camera path
@@ -368,8 +334,8 @@ def test_light_seen_in_water_counts_with_its_fresnel_weight_on_every_path(tmp_pa
     ]
     f = fresnel(np.array(1 / math.sqrt(5)), WATER)  # the centre pixel's angle
     for image in images:
-        assert image[..., 0].mean() == pytest.approx(f * LE, rel=0.02)
-        assert image[..., 1].mean() == pytest.approx((1 - f) * LE / WATER**2, rel=0.002)
+        assert image[..., 0].mean() == pytest.approx(f * WATER_LE, rel=0.02)
+        assert image[..., 1].mean() == pytest.approx((1 - f) * WATER_LE / WATER**2, rel=0.002)
         assert not image[..., 2].any()
     # Per pixel, two seeds differ only by where the samples fall inside the pixel.
     assert np.allclose(images[0], images[1], rtol=0.01)

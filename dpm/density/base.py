@@ -8,7 +8,7 @@ import numpy as np
 
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap, VisiblePoints
-from dpm.tracer.path import LUMINANCE
+from dpm.tracer.visible import LUMINANCE
 
 
 class Estimator(Protocol):

@@ -20,6 +20,11 @@ pixels. The caustic estimator is SPPM, never the network: at equal time the netw
 is not repaid (benchmarks/results/dpm.md). The path-traced image is denoised with its albedo
 and normal guides and the caustic image is added after, so the denoiser neither smears
 caustics nor paints blotches where they meet glass or shadow.
+In scenes with mirrors or glass, the light the camera sees along its specular chains (a
+small light's images in them, specks that may cover a hundredth of a pixel) is estimated
+apart from the paths, from EMISSION_SAMPLES more camera samples per pass in the pixels that
+see a mirror or glass; where it is known to SEEN_ERROR it is added after the denoiser (which
+takes such specks for noise), elsewhere it goes through the denoiser with the paths.
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ from tqdm import tqdm
 
 from dpm.camera import Camera
 from dpm.denoise import denoise, guides, restore_certain
+from dpm.density.base import luminance
 from dpm.density.ppm import ALPHA, PPMState, check_progressive
 from dpm.density.progressive import pass_seed
 from dpm.errors import InputError
@@ -46,6 +52,8 @@ from dpm.tracer import (
     BVH,
     VisiblePoints,
     shade,
+    specular_pixels,
+    trace_emitted,
     trace_listed,
     trace_photons,
     trace_pixels,
@@ -57,6 +65,12 @@ RADIUS_FOOTPRINTS = 2.0  # initial radius per pixel, in pixel footprints at its 
 PHOTONS_PER_PIXEL = 4.0  # photon paths per pass per pixel when the plan keeps caustics (tuned:
 # benchmarks/auto_tuning.py, best on the ring, tied on glass egg, pool1 and dragon)
 GRID_RADII = 4.0  # first radius at later diffuse vertices, in median first-pass pixel radii
+# Extra camera samples per pass of the light seen in mirrors and glass, in pixels that see
+# them: a light's image there can be a speck covering a hundredth of a pixel, which one path
+# per pass finds by luck (the glass egg's worst pixels).
+EMISSION_SAMPLES = 16
+SEEN_ERROR = 0.6  # relative standard error of a pixel's light seen below which it skips
+# the denoiser
 MIN_CAUSTIC_SHARE = 1e-3  # caustics under this share of the first pass's light are left out
 # Seconds kept for what follows the last pass (denoising, writing): a fixed part and per pixel.
 FINISH_SECONDS, FINISH_SECONDS_PER_PIXEL = 0.05, 3e-6
@@ -165,6 +179,32 @@ class Auto(Method):
         if not has_specular(scene):
             plan = make_plan(scene, pixels, 1.0, 0.0, None)
         dropped = 0
+        # With mirrors or glass, the light seen along the camera's specular chains (the
+        # lights' images in them: specks that may cover a hundredth of a pixel) is kept apart
+        # from the paths: EMISSION_SAMPLES more camera samples per pass find it where pixels
+        # see a mirror or glass, and where it is known to SEEN_ERROR it is added after
+        # the denoiser (which takes such specks for noise). The paths (and so adaptive
+        # sampling) carry the rest.
+        separate = has_specular(scene)
+        every = np.arange(pixels)
+        glassy = np.flatnonzero(specular_pixels(scene, bvh, camera)) if separate and full else None
+        glow = np.zeros((pixels, 3))  # sums over samples of the light seen,
+        glow_square = np.zeros(pixels)  # of its squared luminance,
+        glow_count = np.zeros(pixels, np.int64)  # and samples
+
+        def see_light(first: np.ndarray) -> None:
+            """Add this pass's light seen: its first sample per pixel (P, 3) and
+            EMISSION_SAMPLES more where the pixel sees a mirror or glass."""
+            sums, squares = trace_emitted(
+                scene, bvh, camera, glassy, EMISSION_SAMPLES, pass_seed(o.seed, j, 2)
+            )
+            glow[:] += first
+            glow[glassy] += sums
+            glow_square[:] += luminance(first) ** 2
+            glow_square[glassy] += squares
+            glow_count[:] += 1
+            glow_count[glassy] += EMISSION_SAMPLES
+
         grid_radius = 0.0  # set at the first pass, then shrunk by each (probabilistic PPM)
         total = o.spp if deadline is None else None
         bar = tqdm(total=total, unit="pass", disable=not o.progress, desc=self.name)
@@ -175,8 +215,13 @@ class Auto(Method):
             if full and plan is not None and plan.caustics == "off":
                 # no caustic estimate: whole pixels in one kernel, no visible points kept
                 with watch("path"):
-                    part, a, n, _, bad = trace_pixels(scene, bvh, camera, 1, seed, (0, h), False)
+                    part, a, n, _, bad = trace_pixels(
+                        scene, bvh, camera, 1, seed, (0, h), False, not separate
+                    )
                 paths.add_pass(j % 2, part.reshape(pixels, 3))
+                if separate:  # the same camera samples' light, as the visible points have it
+                    with watch("emitted"):
+                        see_light(trace_emitted(scene, bvh, camera, every, 1, seed)[0])
                 grid = None
                 albedo += a.reshape(pixels, 3)
                 normal += n.reshape(pixels, 3)
@@ -199,7 +244,13 @@ class Auto(Method):
                     with watch("shade"):
                         grid = None if photons is None else photon_grid(photons, grid_radius)
                         reflected, bad = shade(scene, bvh, points, seed, False, grid)
-                        paths.add_pass(j % 2, points.emitted + points.throughput * reflected)
+                        if separate:
+                            paths.add_pass(j % 2, points.throughput * reflected)
+                        else:
+                            paths.add_pass(j % 2, points.emitted + points.throughput * reflected)
+                    if separate:
+                        with watch("emitted"):
+                            see_light(points.emitted.astype(np.float64))
                     dropped += bad
                     a, n = guides(points)
                     albedo += a
@@ -211,13 +262,15 @@ class Auto(Method):
                     budget = round(EXTRA_PER_PIXEL * pixels)
                     extra, counts = paths.plan_extra(j % 2, budget, EXTRA_CAP)
                     sums, squares, bad = trace_listed(
-                        scene, bvh, camera, extra, counts, pass_seed(o.seed, j, 1), grid
-                    )
+                        scene, bvh, camera, extra, counts, pass_seed(o.seed, j, 1), grid,
+                        not separate,
+                    )  # fmt: skip
                     paths.extra[j % 2].add(extra, counts, sums, squares)
                     extra_paths += int(counts.sum())
                     dropped += bad
             if plan is None:
-                path_light = float(paths.mean().mean(axis=1).sum()) if full else 0.0
+                seen = glow / np.maximum(glow_count, 1)[:, None]
+                path_light = float((paths.mean() + seen).mean(axis=1).sum()) if full else 0.0
                 caustic_light = float(state.irradiance().mean(axis=1).sum())
                 plan = make_plan(scene, pixels, path_light, caustic_light, given, why)
             j += 1
@@ -233,21 +286,30 @@ class Auto(Method):
         bar.close()
         self.passes, self.plan, self.caustic_photons = j, plan, state.photons
         self.dropped, self.extra_paths = dropped, extra_paths
+        self.light_pixels = 0 if glassy is None else len(glassy)
         caustic = state.irradiance().astype(np.float32)  # weighted by throughput · ρ/π
         if not full:
             return caustic.reshape(h, w, 3), self.stats()
-        image = paths.mean().astype(np.float32).reshape(h, w, 3)
+        n = np.maximum(glow_count, 1)
+        seen = glow / n[:, None]
+        mean = luminance(seen)
+        error = np.sqrt(np.maximum(glow_square / n - mean**2, 0) / n)
+        after = (error < SEEN_ERROR * mean)[:, None]  # light known well enough to keep as is
+        image = (paths.mean() + np.where(after, 0, seen)).astype(np.float32).reshape(h, w, 3)
         if o.denoised:
             with watch("denoise"):
                 guide = (albedo / j).reshape(h, w, 3), (normal / j).reshape(h, w, 3)
-                error = paths.standard_error().reshape(h, w)
-                image = restore_certain(image, denoise(image, *guide), error)
+                total = np.hypot(paths.standard_error(), np.where(after[:, 0], 0, error))
+                image = restore_certain(image, denoise(image, *guide), total.reshape(h, w))
+        image += np.where(after, seen, 0).astype(np.float32).reshape(h, w, 3)
         return image + caustic.reshape(h, w, 3), self.stats()
 
     def stats(self) -> dict[str, Any]:
-        """Passes, the plan, photon paths and caustic photons."""
+        """Passes, the plan, caustic photons, dropped samples, adaptive paths, and the pixels
+        given extra samples of the light seen in mirrors and glass (and how many per pass)."""
         return {
             "passes": self.passes, "plan": self.plan.as_dict(), "spp": self.passes,
             "caustic_photons": self.caustic_photons, "nonfinite_samples": self.dropped,
-            "extra_paths": self.extra_paths,
+            "extra_paths": self.extra_paths, "light_pixels": self.light_pixels,
+            "light_samples_per_pass": EMISSION_SAMPLES if self.light_pixels else 0,
         }  # fmt: skip

@@ -10,7 +10,12 @@ from dpm.tracer.bvh import BVH, BVHArrays, build_bvh_from_triangles
 from dpm.tracer.path import shade, trace_listed, trace_pixels
 from dpm.tracer.photons import PhotonMap, trace_photons
 from dpm.tracer.traverse import any_hit_batch, brute_force_batch, closest_hit_batch
-from dpm.tracer.visible import VisiblePoints, trace_visible_points
+from dpm.tracer.visible import (
+    VisiblePoints,
+    specular_pixels,
+    trace_emitted,
+    trace_visible_points,
+)
 
 __all__ = [
     "BVH",
@@ -25,6 +30,8 @@ __all__ = [
     "trace_photons",
     "trace_listed",
     "trace_pixels",
+    "specular_pixels",
+    "trace_emitted",
     "trace_visible_points",
 ]
 

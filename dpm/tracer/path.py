@@ -24,7 +24,13 @@ from dpm.tracer.photon_grid import PhotonGrid, grid_irradiance
 from dpm.tracer.sampling import sample_cosine, uniform
 from dpm.tracer.surface import next_surface
 from dpm.tracer.traverse import any_hit, new_stack, spawn_offset
-from dpm.tracer.visible import RR_SPECULAR, SHADE_DIM0, VisiblePoints, camera_sample
+from dpm.tracer.visible import (
+    LUMINANCE,
+    RR_SPECULAR,
+    SHADE_DIM0,
+    VisiblePoints,
+    camera_sample,
+)
 
 MAX_VERTICES = 256  # path vertices after the visible point; Russian roulette ends most sooner
 RR_START = 3  # vertices before Russian roulette may end a path
@@ -32,7 +38,6 @@ RR_SURVIVAL = 0.95  # the most likely survival of Russian roulette at a diffuse 
 DIMS_PER_VERTEX = 8  # Fresnel, light pick, light point (2), direction (2), roulette, spare
 SAMPLES_PER_TASK = 64
 PATHS_PER_TASK = 1024  # the most camera paths of one pixel in one task of `trace_listed`
-LUMINANCE = (0.2126, 0.7152, 0.0722)  # Rec. 709 weights (dpm.density.base.luminance too)
 SCATTER = 2**31 - 1  # a prime above any task count: i -> i·SCATTER mod n is a permutation
 
 
@@ -223,11 +228,13 @@ def shade(
 
 @nb.njit(cache=True, _nrt=False, error_model="numpy")
 def path_pixel(
-    bvh, sc, cam, width, height, pix, first, spp, stride, seed, eps, caustics, grid, stack
+    bvh, sc, cam, width, height, pix, first, spp, stride, seed, eps, caustics, emission, grid,
+    stack,
 ):  # fmt: skip
     """Sums over spp camera paths of pixel pix (row-major index), random streams pix·stride
     + first … first+spp-1: (radiance r, g, b, denoiser albedo r, g, b and normal x, y, z,
-    visible points found, non-finite samples, sum of each path's squared luminance)."""
+    visible points found, non-finite samples, sum of each path's squared luminance); with
+    emission False, the light seen along the camera's specular chain is left out."""
     y, x = pix // width, pix % width
     sr = sg = sb = gr = gg = gb = hx = hy = hz = sq = 0.0
     hits = bad = 0
@@ -235,6 +242,8 @@ def path_pixel(
         stream = pix * stride + first + s
         v = camera_sample(bvh, sc, cam, width, height, x, y, stream, seed, eps, stack)
         er, eg, eb = v[13], v[14], v[15]
+        if not emission:
+            er = eg = eb = 0.0
         if v[0]:
             hits += 1
             r, g, b = shade_path(
@@ -250,9 +259,9 @@ def path_pixel(
             gb += min(max(v[9] * v[12], 0.0), 1.0)
             hx, hy, hz = hx + v[4], hy + v[5], hz + v[6]
         else:
-            peak = max(er, eg, eb)
+            peak = max(v[13], v[14], v[15])
             if peak > 0:  # a light seen directly: its normalised colour
-                gr, gg, gb = gr + er / peak, gg + eg / peak, gb + eb / peak
+                gr, gg, gb = gr + v[13] / peak, gg + v[14] / peak, gb + v[15] / peak
         sr, sg, sb = sr + er, sg + eg, sb + eb
         lum = LUMINANCE[0] * er + LUMINANCE[1] * eg + LUMINANCE[2] * eb
         sq += lum * lum
@@ -261,7 +270,7 @@ def path_pixel(
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
 def pixels_kernel(
-    bvh, depth, sc, cam, width, height, row0, row1, spp, seed, eps, caustics,
+    bvh, depth, sc, cam, width, height, row0, row1, spp, seed, eps, caustics, emission,
     image, albedo, normal,
 ):  # fmt: skip
     """Per pixel of image rows row0..row1-1 (row-major, (P, 3) outputs): the mean radiance of
@@ -280,7 +289,7 @@ def pixels_kernel(
         for p in range(task * per_task, min(n, (task + 1) * per_task)):
             v = path_pixel(
                 bvh, sc, cam, width, height, row0 * width + p, 0, spp, spp, seed, eps,
-                caustics, None, stack,
+                caustics, emission, None, stack,
             )  # fmt: skip
             image[p, 0], image[p, 1], image[p, 2] = v[0] / spp, v[1] / spp, v[2] / spp
             albedo[p, 0], albedo[p, 1], albedo[p, 2] = v[3] / spp, v[4] / spp, v[5] / spp
@@ -298,17 +307,19 @@ def trace_pixels(
     seed: int,
     rows: tuple[int, int],
     caustics: bool = True,
+    emission: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
     """Path tracing of whole pixels, image rows rows[0]..rows[1]-1: (rows, W, 3) float32 mean
     radiance, mean denoiser albedo and normal, visible points found and non-finite samples
     dropped. The same samples (random streams) as `trace_visible_points` then `shade`, in one
-    pass that keeps no per-sample arrays; it equals them within float rounding."""
+    pass that keeps no per-sample arrays; it equals them within float rounding. emission
+    False leaves out the light seen along the camera's specular chains."""
     row0, row1 = rows
     shape = (row1 - row0, camera.width, 3)
     image, albedo, normal = (np.empty((shape[0] * shape[1], 3)) for _ in range(3))
     hits, bad = pixels_kernel(
         bvh.arrays, bvh.depth, scene.kernel_arrays(), camera.basis(), camera.width,
-        camera.height, row0, row1, spp, seed, spawn_offset(scene), caustics,
+        camera.height, row0, row1, spp, seed, spawn_offset(scene), caustics, emission,
         image, albedo, normal,
     )  # fmt: skip
     out = tuple(a.astype(np.float32).reshape(shape) for a in (image, albedo, normal))
@@ -317,7 +328,8 @@ def trace_pixels(
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
 def listed_kernel(
-    bvh, depth, sc, cam, width, height, pixels, first, counts, stride, seed, eps, grid, out, sq
+    bvh, depth, sc, cam, width, height, pixels, first, counts, stride, seed, eps, emission,
+    grid, out, sq,
 ):  # fmt: skip
     """Per listed task: the radiance sums (L, 3) of counts[i] camera paths of pixels[i]
     (streams pixel·stride + first[i] + 0 … counts[i]-1) into out, their squared luminances'
@@ -327,7 +339,7 @@ def listed_kernel(
         stack = new_stack(depth)
         v = path_pixel(
             bvh, sc, cam, width, height, pixels[i], first[i], counts[i], stride, seed, eps,
-            False, grid, stack,
+            False, emission, grid, stack,
         )  # fmt: skip
         out[i, 0], out[i, 1], out[i, 2], sq[i], bad[i] = v[0], v[1], v[2], v[11], v[10]
     return bad.sum()
@@ -341,12 +353,14 @@ def trace_listed(
     counts: np.ndarray,
     seed: int,
     grid: PhotonGrid | None = None,
+    emission: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """More camera paths at some pixels, as pt-nocaustic (or `auto`'s paths with a photon
     grid) would trace them: pixels (L,) row-major indices, counts (L,) paths each. Returns the
     radiance sums (L, 3) float64, the sums of each path's squared luminance (L,) float64 and
-    the non-finite samples dropped. Streams are pixel·max(counts) + 0 … counts-1, so a seed
-    not used for the pixels' other paths gives independent samples."""
+    the non-finite samples dropped (emission False: without the light seen along the camera's
+    specular chains). Streams are pixel·max(counts) + 0 … counts-1, so a seed not used for the
+    pixels' other paths gives independent samples."""
     pixels = np.asarray(pixels, np.int64)
     counts = np.asarray(counts, np.int64)
     out = np.zeros((len(pixels), 3))
@@ -364,7 +378,7 @@ def trace_listed(
     bad = listed_kernel(
         bvh.arrays, bvh.depth, scene.kernel_arrays(), camera.basis(), camera.width,
         camera.height, pixels[owner], first, task_counts, int(counts.max()), seed,
-        spawn_offset(scene), grid, task_out, task_sq,
+        spawn_offset(scene), emission, grid, task_out, task_sq,
     )  # fmt: skip
     np.add.at(out, owner, task_out)
     np.add.at(sq, owner, task_sq)

@@ -17,6 +17,7 @@ from dataclasses import dataclass, fields
 
 import numba as nb
 import numpy as np
+from scipy.ndimage import binary_dilation
 
 from dpm.camera import Camera
 from dpm.scene import DIELECTRIC, DIFFUSE, Scene
@@ -35,6 +36,7 @@ from dpm.tracer.traverse import hit_triangle, new_stack, ray_setup, spawn_offset
 MAX_SPECULAR_DEPTH = 256  # specular vertices a camera path may pass before it is dropped
 RR_SPECULAR = 16  # specular vertices before Russian roulette may end a path (also for photons)
 SHADE_DIM0 = 2 + 2 * MAX_SPECULAR_DEPTH
+LUMINANCE = (0.2126, 0.7152, 0.0722)  # Rec. 709 weights (dpm.density.base.luminance too)
 
 
 _NO_HIT = (-1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0.0, False)  # `next_surface`'s miss
@@ -221,3 +223,64 @@ def trace_visible_points(
         camera.height, row0, row1, spp, seed, spawn_offset(scene), *vec, hit, pixel, sample,
     )  # fmt: skip
     return VisiblePoints(*vec, hit, pixel, sample)
+
+
+@nb.njit(cache=True, parallel=True, error_model="numpy")
+def _emitted_kernel(bvh, depth, sc, cam, width, height, pixels, counts, seed, eps, out, sq):
+    """out[i], sq[i] = the sums of the emitted radiance and of its squared luminance over
+    counts[i] camera samples of pixel pixels[i] (streams pixel·max(counts) + 0 …)."""
+    stride = counts.max()
+    for i in nb.prange(len(pixels)):
+        stack = new_stack(depth)
+        pix = pixels[i]
+        y, x = pix // width, pix % width
+        er = eg = eb = 0.0
+        q = 0.0
+        for s in range(counts[i]):
+            v = camera_sample(bvh, sc, cam, width, height, x, y, pix * stride + s, seed, eps, stack)
+            er, eg, eb = er + v[13], eg + v[14], eb + v[15]
+            lum = LUMINANCE[0] * v[13] + LUMINANCE[1] * v[14] + LUMINANCE[2] * v[15]
+            q += lum * lum
+        out[i, 0], out[i, 1], out[i, 2], sq[i] = er, eg, eb, q
+
+
+def trace_emitted(
+    scene: Scene, bvh: BVH, camera: Camera, pixels: np.ndarray, counts: np.ndarray, seed: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Over counts (L,) camera samples of each listed pixel (L,) (row-major indices): the sum
+    of the radiance of lights seen along their specular chains (L, 3) float64 (W m⁻² sr⁻¹)
+    and of its squared luminance (L,) float64."""
+    out, sq = np.zeros((len(pixels), 3)), np.zeros(len(pixels))
+    counts = np.broadcast_to(np.asarray(counts, np.int64), (len(pixels),)).copy()
+    if len(pixels) and counts.max() > 0:
+        _emitted_kernel(
+            bvh.arrays, bvh.depth, scene.kernel_arrays(), camera.basis(), camera.width,
+            camera.height, np.asarray(pixels, np.int64), counts, seed, spawn_offset(scene),
+            out, sq,
+        )  # fmt: skip
+    return out, sq
+
+
+@nb.njit(cache=True, parallel=True, error_model="numpy")
+def _specular_kernel(bvh, depth, sc, cam, width, height, out):
+    """out[p] = whether pixel p's centre sees a mirror or glass first."""
+    for p in nb.prange(width * height):
+        stack = new_stack(depth)
+        fx = 2.0 * (p % width + 0.5) / width - 1.0
+        fy = 1.0 - 2.0 * (p // width + 0.5) / height
+        dx = cam[1, 0] + fx * cam[2, 0] + fy * cam[3, 0]
+        dy = cam[1, 1] + fx * cam[2, 1] + fy * cam[3, 1]
+        dz = cam[1, 2] + fx * cam[2, 2] + fy * cam[3, 2]
+        hit = next_surface(bvh, sc, cam[0, 0], cam[0, 1], cam[0, 2], dx, dy, dz, stack)
+        out[p] = hit[0] >= 0 and sc.kind[hit[8]] != DIFFUSE
+
+
+def specular_pixels(scene: Scene, bvh: BVH, camera: Camera) -> np.ndarray:
+    """(H·W,) bool: pixels whose centre, or a neighbour's, sees a mirror or glass first."""
+    out = np.zeros(camera.width * camera.height, np.bool_)
+    _specular_kernel(
+        bvh.arrays, bvh.depth, scene.kernel_arrays(), camera.basis(), camera.width,
+        camera.height, out,
+    )  # fmt: skip
+    grown = binary_dilation(out.reshape(camera.height, camera.width), np.ones((3, 3), bool))
+    return grown.ravel()
