@@ -65,10 +65,11 @@ RADIUS_FOOTPRINTS = 2.0  # initial radius per pixel, in pixel footprints at its 
 PHOTONS_PER_PIXEL = 4.0  # photon paths per pass per pixel when the plan keeps caustics (tuned:
 # benchmarks/auto_tuning.py, best on the ring, tied on glass egg, pool1 and dragon)
 GRID_RADII = 4.0  # first radius at later diffuse vertices, in median first-pass pixel radii
-# Extra camera samples per pass of the light seen in mirrors and glass, in pixels that see
-# them: a light's image there can be a speck covering a hundredth of a pixel, which one path
-# per pass finds by luck (the glass egg's worst pixels).
-EMISSION_SAMPLES = 16
+# Extra camera samples per pass of the light seen in mirrors and glass, per pixel that sees
+# them, and as many again placed by adaptive sampling (at most EMISSION_CAP on one pixel): a
+# light's image there can be a speck covering a hundredth of a pixel, which one path per pass
+# finds by luck (the glass egg's worst pixels).
+EMISSION_SAMPLES, EMISSION_CAP = 8, 256
 SEEN_ERROR = 0.6  # relative standard error of a pixel's light seen below which it skips
 # the denoiser
 MIN_CAUSTIC_SHARE = 1e-3  # caustics under this share of the first pass's light are left out
@@ -180,30 +181,32 @@ class Auto(Method):
             plan = make_plan(scene, pixels, 1.0, 0.0, None)
         dropped = 0
         # With mirrors or glass, the light seen along the camera's specular chains (the
-        # lights' images in them: specks that may cover a hundredth of a pixel) is kept apart
-        # from the paths: EMISSION_SAMPLES more camera samples per pass find it where pixels
-        # see a mirror or glass, and where it is known to SEEN_ERROR it is added after
-        # the denoiser (which takes such specks for noise). The paths (and so adaptive
-        # sampling) carry the rest.
+        # lights' images in them: specks that may cover a hundredth of a pixel) is estimated
+        # apart from the paths, from more camera samples where pixels see a mirror or glass:
+        # EMISSION_SAMPLES per pass each, and as many again placed where it varies (adaptive
+        # sampling, cross-fitted as for the paths). Where it is known to SEEN_ERROR it is
+        # added after the denoiser (which takes such specks for noise). The paths (and so
+        # their adaptive sampling) carry the rest.
         separate = has_specular(scene)
         every = np.arange(pixels)
         glassy = np.flatnonzero(specular_pixels(scene, bvh, camera)) if separate and full else None
-        glow = np.zeros((pixels, 3))  # sums over samples of the light seen,
-        glow_square = np.zeros(pixels)  # of its squared luminance,
-        glow_count = np.zeros(pixels, np.int64)  # and samples
+        glow = Halves(h, w)  # the light seen, per half: samples every pass, and extra ones
 
         def see_light(first: np.ndarray) -> None:
-            """Add this pass's light seen: its first sample per pixel (P, 3) and
-            EMISSION_SAMPLES more where the pixel sees a mirror or glass."""
+            """Add this pass's light seen: its first sample per pixel (P, 3), then
+            EMISSION_SAMPLES more where the pixel sees a mirror or glass, then as many again
+            where the other half's samples vary most."""
+            half = j % 2
+            glow.add_pass(half, first)
             sums, squares = trace_emitted(
                 scene, bvh, camera, glassy, EMISSION_SAMPLES, pass_seed(o.seed, j, 2)
             )
-            glow[:] += first
-            glow[glassy] += sums
-            glow_square[:] += luminance(first) ** 2
-            glow_square[glassy] += squares
-            glow_count[:] += 1
-            glow_count[glassy] += EMISSION_SAMPLES
+            glow.base[half].add(glassy, EMISSION_SAMPLES, sums, squares)
+            extra, counts = glow.plan_extra(half, EMISSION_SAMPLES * len(glassy), EMISSION_CAP)
+            sums, squares = trace_emitted(
+                scene, bvh, camera, extra, counts, pass_seed(o.seed, j, 3)
+            )
+            glow.extra[half].add(extra, counts, sums, squares)
 
         grid_radius = 0.0  # set at the first pass, then shrunk by each (probabilistic PPM)
         total = o.spp if deadline is None else None
@@ -269,8 +272,7 @@ class Auto(Method):
                     extra_paths += int(counts.sum())
                     dropped += bad
             if plan is None:
-                seen = glow / np.maximum(glow_count, 1)[:, None]
-                path_light = float((paths.mean() + seen).mean(axis=1).sum()) if full else 0.0
+                path_light = float((paths.mean() + glow.mean()).mean(axis=1).sum()) if full else 0.0
                 caustic_light = float(state.irradiance().mean(axis=1).sum())
                 plan = make_plan(scene, pixels, path_light, caustic_light, given, why)
             j += 1
@@ -290,11 +292,8 @@ class Auto(Method):
         caustic = state.irradiance().astype(np.float32)  # weighted by throughput · ρ/π
         if not full:
             return caustic.reshape(h, w, 3), self.stats()
-        n = np.maximum(glow_count, 1)
-        seen = glow / n[:, None]
-        mean = luminance(seen)
-        error = np.sqrt(np.maximum(glow_square / n - mean**2, 0) / n)
-        after = (error < SEEN_ERROR * mean)[:, None]  # light known well enough to keep as is
+        seen, error = glow.mean(), glow.standard_error()
+        after = (error < SEEN_ERROR * luminance(seen))[:, None]  # known well enough as it is
         image = (paths.mean() + np.where(after, 0, seen)).astype(np.float32).reshape(h, w, 3)
         if o.denoised:
             with watch("denoise"):
