@@ -86,17 +86,26 @@ class VisiblePoints:
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
-def camera_sample(bvh, sc, cam, width, height, x, y, stream, seed, eps, stack):
-    """(hit, point x, y, z, normal x, y, z, albedo r, g, b, throughput r, g, b, emitted r, g,
-    b) of sample `stream` of pixel (x, y): its camera ray followed through specular vertices
-    to the first diffuse surface. A miss has zero point, normal, albedo and throughput."""
-    fx = 2.0 * (x + uniform(seed, stream, 0)) / width - 1.0
-    fy = 1.0 - 2.0 * (y + uniform(seed, stream, 1)) / height
+def camera_ray(cam, width, height, px, py):
+    """Unit direction (x, y, z) of the camera ray through image point (px, py) (pixels from
+    the top left corner; cam: origin, forward, right and up rows)."""
+    fx = 2.0 * px / width - 1.0
+    fy = 1.0 - 2.0 * py / height
     dx = cam[1, 0] + fx * cam[2, 0] + fy * cam[3, 0]
     dy = cam[1, 1] + fx * cam[2, 1] + fy * cam[3, 1]
     dz = cam[1, 2] + fx * cam[2, 2] + fy * cam[3, 2]
     inv_len = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
-    dx, dy, dz = dx * inv_len, dy * inv_len, dz * inv_len
+    return dx * inv_len, dy * inv_len, dz * inv_len
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def camera_sample(bvh, sc, cam, width, height, x, y, stream, seed, eps, stack):
+    """(hit, point x, y, z, normal x, y, z, albedo r, g, b, throughput r, g, b, emitted r, g,
+    b) of sample `stream` of pixel (x, y): its camera ray followed through specular vertices
+    to the first diffuse surface. A miss has zero point, normal, albedo and throughput."""
+    dx, dy, dz = camera_ray(
+        cam, width, height, x + uniform(seed, stream, 0), y + uniform(seed, stream, 1)
+    )
     tri, _, px, py, pz, nx, ny, nz, m, cos_i, front = next_surface(
         bvh, sc, cam[0, 0], cam[0, 1], cam[0, 2], dx, dy, dz, stack
     )
@@ -266,11 +275,7 @@ def _specular_kernel(bvh, depth, sc, cam, width, height, out):
     """out[p] = whether pixel p's centre sees a mirror or glass first."""
     for p in nb.prange(width * height):
         stack = new_stack(depth)
-        fx = 2.0 * (p % width + 0.5) / width - 1.0
-        fy = 1.0 - 2.0 * (p // width + 0.5) / height
-        dx = cam[1, 0] + fx * cam[2, 0] + fy * cam[3, 0]
-        dy = cam[1, 1] + fx * cam[2, 1] + fy * cam[3, 1]
-        dz = cam[1, 2] + fx * cam[2, 2] + fy * cam[3, 2]
+        dx, dy, dz = camera_ray(cam, width, height, p % width + 0.5, p // width + 0.5)
         hit = next_surface(bvh, sc, cam[0, 0], cam[0, 1], cam[0, 2], dx, dy, dz, stack)
         out[p] = hit[0] >= 0 and sc.kind[hit[8]] != DIFFUSE
 
