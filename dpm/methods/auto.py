@@ -22,9 +22,10 @@ and normal guides and the caustic image is added after, so the denoiser neither 
 caustics nor paints blotches where they meet glass or shadow.
 In scenes with mirrors or glass, the light the camera sees along its specular chains (a
 small light's images in them, specks that may cover a hundredth of a pixel) is estimated
-apart from the paths, from EMISSION_SAMPLES more camera samples per pass in the pixels that
-see a mirror or glass; where it is known to SEEN_ERROR it is added after the denoiser (which
-takes such specks for noise), elsewhere it goes through the denoiser with the paths.
+apart from the paths, from EMISSION_SAMPLES more camera samples per pass in each pixel that
+sees a mirror or glass and as many again placed by adaptive sampling; where it is known to
+SEEN_ERROR it is added after the denoiser (which takes such specks for noise), elsewhere it
+goes through the denoiser with the paths.
 """
 
 from __future__ import annotations
@@ -289,6 +290,7 @@ class Auto(Method):
         self.passes, self.plan, self.caustic_photons = j, plan, state.photons
         self.dropped, self.extra_paths = dropped, extra_paths
         self.light_pixels = 0 if glassy is None else len(glassy)
+        self.light_samples = int(sum(glow.half(k).count.sum() for k in (0, 1))) - j * pixels
         caustic = state.irradiance().astype(np.float32)  # weighted by throughput · ρ/π
         if not full:
             return caustic.reshape(h, w, 3), self.stats()
@@ -305,10 +307,10 @@ class Auto(Method):
 
     def stats(self) -> dict[str, Any]:
         """Passes, the plan, caustic photons, dropped samples, adaptive paths, and the pixels
-        given extra samples of the light seen in mirrors and glass (and how many per pass)."""
+        given extra samples of the light seen in mirrors and glass (and those samples)."""
         return {
             "passes": self.passes, "plan": self.plan.as_dict(), "spp": self.passes,
             "caustic_photons": self.caustic_photons, "nonfinite_samples": self.dropped,
             "extra_paths": self.extra_paths, "light_pixels": self.light_pixels,
-            "light_samples_per_pass": EMISSION_SAMPLES if self.light_pixels else 0,
+            "light_samples": max(self.light_samples, 0),
         }  # fmt: skip
