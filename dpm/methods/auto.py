@@ -189,7 +189,6 @@ class Auto(Method):
         # added after the denoiser (which takes such specks for noise). The paths (and so
         # their adaptive sampling) carry the rest.
         separate = has_specular(scene)
-        every = np.arange(pixels)
         glassy = np.flatnonzero(specular_pixels(scene, bvh, camera)) if separate and full else None
         glow = Halves(h, w)  # the light seen, per half: samples every pass, and extra ones
 
@@ -216,16 +215,12 @@ class Auto(Method):
         begun = time.monotonic()
         while True:
             seed = pass_seed(o.seed, j)
-            if full and plan is not None and plan.caustics == "off":
-                # no caustic estimate: whole pixels in one kernel, no visible points kept
+            if full and plan is not None and plan.caustics == "off" and not separate:
+                # no caustic estimate and no light seen apart: whole pixels in one kernel, no
+                # visible points kept
                 with watch("path"):
-                    part, a, n, _, bad = trace_pixels(
-                        scene, bvh, camera, 1, seed, (0, h), False, not separate
-                    )
+                    part, a, n, _, bad = trace_pixels(scene, bvh, camera, 1, seed, (0, h), False)
                 paths.add_pass(j % 2, part.reshape(pixels, 3))
-                if separate:  # the same camera samples' light, as the visible points have it
-                    with watch("emitted"):
-                        see_light(trace_emitted(scene, bvh, camera, every, 1, seed)[0])
                 grid = None
                 albedo += a.reshape(pixels, 3)
                 normal += n.reshape(pixels, 3)

@@ -270,7 +270,7 @@ def path_pixel(
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
 def pixels_kernel(
-    bvh, depth, sc, cam, width, height, row0, row1, spp, seed, eps, caustics, emission,
+    bvh, depth, sc, cam, width, height, row0, row1, spp, seed, eps, caustics,
     image, albedo, normal,
 ):  # fmt: skip
     """Per pixel of image rows row0..row1-1 (row-major, (P, 3) outputs): the mean radiance of
@@ -289,7 +289,7 @@ def pixels_kernel(
         for p in range(task * per_task, min(n, (task + 1) * per_task)):
             v = path_pixel(
                 bvh, sc, cam, width, height, row0 * width + p, 0, spp, spp, seed, eps,
-                caustics, emission, None, stack,
+                caustics, True, None, stack,
             )  # fmt: skip
             image[p, 0], image[p, 1], image[p, 2] = v[0] / spp, v[1] / spp, v[2] / spp
             albedo[p, 0], albedo[p, 1], albedo[p, 2] = v[3] / spp, v[4] / spp, v[5] / spp
@@ -307,19 +307,17 @@ def trace_pixels(
     seed: int,
     rows: tuple[int, int],
     caustics: bool = True,
-    emission: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
     """Path tracing of whole pixels, image rows rows[0]..rows[1]-1: (rows, W, 3) float32 mean
     radiance, mean denoiser albedo and normal, visible points found and non-finite samples
     dropped. The same samples (random streams) as `trace_visible_points` then `shade`, in one
-    pass that keeps no per-sample arrays; it equals them within float rounding. emission
-    False leaves out the light seen along the camera's specular chains."""
+    pass that keeps no per-sample arrays; it equals them within float rounding."""
     row0, row1 = rows
     shape = (row1 - row0, camera.width, 3)
     image, albedo, normal = (np.empty((shape[0] * shape[1], 3)) for _ in range(3))
     hits, bad = pixels_kernel(
         bvh.arrays, bvh.depth, scene.kernel_arrays(), camera.basis(), camera.width,
-        camera.height, row0, row1, spp, seed, spawn_offset(scene), caustics, emission,
+        camera.height, row0, row1, spp, seed, spawn_offset(scene), caustics,
         image, albedo, normal,
     )  # fmt: skip
     out = tuple(a.astype(np.float32).reshape(shape) for a in (image, albedo, normal))
