@@ -25,6 +25,8 @@ from dpm.io import KNEE, linear_to_srgb8, tone_map
 from dpm.methods import auto
 from dpm.render import RenderOptions, render
 from dpm.tracer import build_bvh, specular_pixels, trace_emitted
+from dpm.tracer.sampling import sobol2
+from dpm.tracer.visible import camera_ray
 
 # The floor and light of conftest, and a glass slab between them: caustics.
 GLASS_OBJ = (
@@ -200,6 +202,60 @@ def test_light_seen_in_glass_that_every_sample_finds_skips_the_denoiser(
     assert seen and not seen[0].any()  # the denoiser saw none of the light
     assert image[..., 0].mean() == pytest.approx(expected[0], rel=0.02)
     assert image[..., 1].mean() == pytest.approx(expected[1], rel=0.002)
+
+
+def test_sobol_points_are_uniform_and_stratified_from_any_scramble() -> None:
+    rng = np.random.default_rng(0)
+    scrambles = rng.integers(0, 2**32, (400, 2))
+    for m in (4, 7):  # every aligned run of 2^m points: one in each 2^-a × 2^-(m-a) box
+        for start in (0, 2**m, 5 * 2**m):
+            for sx, sy in scrambles[:5]:
+                pts = np.array([sobol2(start + k, sx, sy) for k in range(2**m)])
+                for a in range(m + 1):
+                    cells = (pts * [2**a, 2 ** (m - a)]).astype(int)
+                    assert len(np.unique(cells, axis=0)) == 2**m
+    for k in (0, 1, 6):  # point k over random scrambles: uniform in the unit square
+        pts = np.array([sobol2(k, sx, sy) for sx, sy in scrambles])
+        assert pts.min() >= 0 and pts.max() < 1
+        counts = np.histogram2d(pts[:, 0], pts[:, 1], bins=4, range=[[0, 1], [0, 1]])[0]
+        assert counts.min() > 10 and counts.max() < 45  # 25 expected in each of 16 cells
+
+
+def test_a_light_edge_across_a_pixel_is_found_in_its_share_of_the_samples(tmp_path: Path) -> None:
+    # The camera looks straight at a light whose edge cuts one pixel: the light's share of
+    # that pixel, over 64 samples of its stratified sequence, is off by at most one sample
+    # (at random it would be off by four: sqrt(64 · 0.3 · 0.7)), and calls that continue
+    # the sequence add up to one call.
+    def scene_with_edge(edge: float):
+        obj = (  # the light, and a wall behind the camera for it to light
+            f"mtllib scene.mtl\nv {edge} -10 0\nv 10 -10 0\nv 10 10 0\nv {edge} 10 0\n"
+            "v -10 -10 6\nv 10 -10 6\nv 10 10 6\nv -10 10 6\n"
+            "usemtl light\nf 1 2 3 4\nusemtl wall\nf 5 8 7 6\n"
+        )
+        toml = (
+            "[camera]\norigin = [0, 0, 5]\ntarget = [0, 0, 0]\nfov = 10\nwidth = 16\nheight = 16\n"
+        )
+        return load_scene(
+            write_scene(
+                tmp_path, obj, "newmtl light\nKe 2 2 2\nnewmtl wall\nKd 0.5 0.5 0.5\n", toml
+            )
+        )
+
+    camera = scene_with_edge(0.0).camera
+    # where the pixel's left and right edges (image columns 8 and 9) meet the light's plane
+    x = [5 * d[0] / -d[2] for d in (camera_ray(camera.basis(), 16, 16, c, 8.5) for c in (8, 9))]
+    share = 0.3
+    scene = scene_with_edge(max(x) - share * abs(x[1] - x[0]))  # lit: x beyond the edge
+    bvh, pixel = build_bvh(scene), np.array([8 * 16 + 8])
+    found = []
+    for seed in range(20):
+        sums, _ = trace_emitted(scene, bvh, camera, pixel, 64, seed)
+        found.append(sums[0, 0] / 2)  # samples that saw the light
+        half, _ = trace_emitted(scene, bvh, camera, pixel, 32, seed)
+        rest, _ = trace_emitted(scene, bvh, camera, pixel, 32, seed, 32)
+        np.testing.assert_allclose(half + rest, sums, rtol=1e-12)
+    assert np.all(np.abs(np.array(found) - 64 * share) <= 1 + 1e-9)
+    assert np.mean(found) == pytest.approx(64 * share, abs=0.25)
 
 
 def test_the_tone_map_keeps_shadows_and_never_clips_highlights() -> None:

@@ -240,7 +240,8 @@ def path_pixel(
     hits = bad = 0
     for s in range(spp):
         stream = pix * stride + first + s
-        v = camera_sample(bvh, sc, cam, width, height, x, y, stream, seed, eps, stack)
+        sx, sy = uniform(seed, stream, 0), uniform(seed, stream, 1)
+        v = camera_sample(bvh, sc, cam, width, height, x, y, sx, sy, stream, seed, eps, stack)
         er, eg, eb = v[13], v[14], v[15]
         if not emission:
             er = eg = eb = 0.0

@@ -76,3 +76,25 @@ def sample_cosine(nx, ny, nz, u1, u2):
         x * ty + y * by + z * ny,
         x * tz + y * bz + z * nz,
     )
+
+
+_TOP = np.int64(1) << np.int64(31)
+_MASK32 = (np.int64(1) << np.int64(32)) - np.int64(1)
+
+
+@nb.njit(cache=True, inline="always")
+def sobol2(index, scramble_x, scramble_y):
+    """Point `index` (≥ 0) of the first two Sobol dimensions, each digitally shifted by a
+    32-bit scramble: (x, y) in [0, 1)². Every point is uniform; every run of 2^m points from
+    a multiple of 2^m puts one in each of 2^m equal boxes of any shape 2^-a × 2^-(m-a)
+    (a (0, 2)-sequence), so a region's share of the samples is off by far less than at random."""
+    x, y = np.int64(scramble_x) & _MASK32, np.int64(scramble_y) & _MASK32
+    i, vx, vy = np.int64(index), _TOP, _TOP
+    while i > 0:  # dimension 1 is van der Corput's; dimension 2's matrix is Pascal's mod 2
+        if i & 1:
+            x ^= vx
+            y ^= vy
+        i >>= 1
+        vx >>= 1
+        vy ^= vy >> 1
+    return np.float64(x) * (1.0 / 4294967296.0), np.float64(y) * (1.0 / 4294967296.0)

@@ -29,7 +29,7 @@ from dpm.tracer.bsdf import (
     specular_survival,
 )
 from dpm.tracer.bvh import BVH
-from dpm.tracer.sampling import uniform
+from dpm.tracer.sampling import sobol2, uniform
 from dpm.tracer.surface import next_surface
 from dpm.tracer.traverse import hit_triangle, new_stack, ray_setup, spawn_offset
 
@@ -99,13 +99,12 @@ def camera_ray(cam, width, height, px, py):
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
-def camera_sample(bvh, sc, cam, width, height, x, y, stream, seed, eps, stack):
+def camera_sample(bvh, sc, cam, width, height, x, y, sx, sy, stream, seed, eps, stack):
     """(hit, point x, y, z, normal x, y, z, albedo r, g, b, throughput r, g, b, emitted r, g,
-    b) of sample `stream` of pixel (x, y): its camera ray followed through specular vertices
-    to the first diffuse surface. A miss has zero point, normal, albedo and throughput."""
-    dx, dy, dz = camera_ray(
-        cam, width, height, x + uniform(seed, stream, 0), y + uniform(seed, stream, 1)
-    )
+    b) of sample `stream` of pixel (x, y) through its point (x + sx, y + sy): its camera ray
+    followed through specular vertices to the first diffuse surface (decisions from
+    dimensions 2 on). A miss has zero point, normal, albedo and throughput."""
+    dx, dy, dz = camera_ray(cam, width, height, x + sx, y + sy)
     tri, _, px, py, pz, nx, ny, nz, m, cos_i, front = next_surface(
         bvh, sc, cam[0, 0], cam[0, 1], cam[0, 2], dx, dy, dz, stack
     )
@@ -197,7 +196,8 @@ def visible_pixel(
         i = row + s
         stream = pix * spp + s
         pixel[i], sample[i] = pix, stream
-        v = camera_sample(bvh, sc, cam, width, height, x, y, stream, seed, eps, stack)
+        sx, sy = uniform(seed, stream, 0), uniform(seed, stream, 1)
+        v = camera_sample(bvh, sc, cam, width, height, x, y, sx, sy, stream, seed, eps, stack)
         hit[i] = v[0]
         position[i, 0], position[i, 1], position[i, 2] = v[1], v[2], v[3]
         normal[i, 0], normal[i, 1], normal[i, 2] = v[4], v[5], v[6]
@@ -235,18 +235,23 @@ def trace_visible_points(
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
-def _emitted_kernel(bvh, depth, sc, cam, width, height, pixels, counts, seed, eps, out, sq):
+def _emitted_kernel(bvh, depth, sc, cam, width, height, pixels, counts, first, seed, eps, out, sq):
     """out[i], sq[i] = the sums of the emitted radiance and of its squared luminance over
-    counts[i] camera samples of pixel pixels[i] (streams pixel·max(counts) + 0 …)."""
-    stride = counts.max()
+    samples first[i] … first[i] + counts[i] - 1 of pixel pixels[i]'s sequence."""
     for i in nb.prange(len(pixels)):
         stack = new_stack(depth)
         pix = pixels[i]
         y, x = pix // width, pix % width
+        # the pixel's scramble (stream pix, dimensions its samples' streams never use)
+        shift_x = np.int64(uniform(seed, pix, 0) * 4294967296.0)
+        shift_y = np.int64(uniform(seed, pix, 1) * 4294967296.0)
         er = eg = eb = 0.0
         q = 0.0
         for s in range(counts[i]):
-            v = camera_sample(bvh, sc, cam, width, height, x, y, pix * stride + s, seed, eps, stack)
+            k = first[i] + s
+            sx, sy = sobol2(k, shift_x, shift_y)
+            stream = (np.int64(pix) << np.int64(32)) | k
+            v = camera_sample(bvh, sc, cam, width, height, x, y, sx, sy, stream, seed, eps, stack)
             er, eg, eb = er + v[13], eg + v[14], eb + v[15]
             lum = LUMINANCE[0] * v[13] + LUMINANCE[1] * v[14] + LUMINANCE[2] * v[15]
             q += lum * lum
@@ -254,18 +259,29 @@ def _emitted_kernel(bvh, depth, sc, cam, width, height, pixels, counts, seed, ep
 
 
 def trace_emitted(
-    scene: Scene, bvh: BVH, camera: Camera, pixels: np.ndarray, counts: np.ndarray, seed: int
+    scene: Scene,
+    bvh: BVH,
+    camera: Camera,
+    pixels: np.ndarray,
+    counts: np.ndarray | int,
+    seed: int,
+    first: np.ndarray | int = 0,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Over counts (L,) camera samples of each listed pixel (L,) (row-major indices): the sum
-    of the radiance of lights seen along their specular chains (L, 3) float64 (W m⁻² sr⁻¹)
-    and of its squared luminance (L,) float64."""
+    """Over counts (L,) camera samples of each listed pixel (L,) (row-major indices), its
+    samples first (L,) onward: the sum of the radiance of lights seen along their specular
+    chains (L, 3) float64 (W m⁻² sr⁻¹) and of its squared luminance (L,) float64. A pixel's
+    samples go through the points of its own scrambled Sobol sequence for `seed` (each
+    uniform, together stratified), so calls with one seed and consecutive `first` extend one
+    sequence: a light's speck covering a hundredth of a pixel is found in close to its share
+    of the samples, not by luck."""
     out, sq = np.zeros((len(pixels), 3)), np.zeros(len(pixels))
     counts = np.broadcast_to(np.asarray(counts, np.int64), (len(pixels),)).copy()
+    first = np.broadcast_to(np.asarray(first, np.int64), (len(pixels),)).copy()
     if len(pixels) and counts.max() > 0:
         _emitted_kernel(
             bvh.arrays, bvh.depth, scene.kernel_arrays(), camera.basis(), camera.width,
-            camera.height, np.asarray(pixels, np.int64), counts, seed, spawn_offset(scene),
-            out, sq,
+            camera.height, np.asarray(pixels, np.int64), counts, first, seed,
+            spawn_offset(scene), out, sq,
         )  # fmt: skip
     return out, sq
 
