@@ -71,7 +71,7 @@ GRID_RADII = 4.0  # first radius at later diffuse vertices, in median first-pass
 # EMISSION_EXTRA per such pixel more placed by adaptive sampling (at most EMISSION_CAP on one
 # pixel): a light's image there can be a speck covering a hundredth of a pixel, which one
 # path per pass finds by luck (the glass egg's worst pixels). 16: the egg's and the dragon's
-# RMSE at 2 s fall by a sixth from 8, the other scenes' rise by 1-4 % (fewer passes).
+# RMSE at 2 s fall by a sixth from 8, the other scenes' rise by 0-5 % (fewer passes).
 EMISSION_SAMPLES, EMISSION_EXTRA, EMISSION_CAP = 16, 8, 256
 SEEN_ERROR = 0.6  # relative standard error of a pixel's light seen below which it skips
 # the denoiser
