@@ -27,6 +27,7 @@ from dpm.tracer.traverse import any_hit, new_stack, spawn_offset
 from dpm.tracer.visible import (
     LUMINANCE,
     RR_SPECULAR,
+    SCATTER,
     SHADE_DIM0,
     VisiblePoints,
     camera_sample,
@@ -38,7 +39,6 @@ RR_SURVIVAL = 0.95  # the most likely survival of Russian roulette at a diffuse 
 DIMS_PER_VERTEX = 8  # Fresnel, light pick, light point (2), direction (2), roulette, spare
 SAMPLES_PER_TASK = 64
 PATHS_PER_TASK = 1024  # the most camera paths of one pixel in one task of `trace_listed`
-SCATTER = 2**31 - 1  # a prime above any task count: i -> i·SCATTER mod n is a permutation
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")

@@ -40,6 +40,7 @@ LUMINANCE = (0.2126, 0.7152, 0.0722)  # Rec. 709 weights (dpm.density.base.lumin
 
 
 _NO_HIT = (-1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0.0, False)  # `next_surface`'s miss
+SCATTER = 2**31 - 1  # a prime above any task count: i -> i·SCATTER mod n is a permutation
 LIGHT_TEST_TRIANGLES = 16  # lights with more triangles are found by tracing, not one by one
 
 
@@ -238,7 +239,11 @@ def trace_visible_points(
 def _emitted_kernel(bvh, depth, sc, cam, width, height, pixels, counts, first, seed, eps, out, sq):
     """out[i], sq[i] = the sums of the emitted radiance and of its squared luminance over
     samples first[i] … first[i] + counts[i] - 1 of pixel pixels[i]'s sequence."""
-    for i in nb.prange(len(pixels)):
+    n = len(pixels)
+    for t in nb.prange(n):
+        # Threads take contiguous ranges of t: scattered over the list, each gets a share of
+        # the pixels whose chains run long (in glass) and of those that end at once.
+        i = (t * SCATTER) % n
         stack = new_stack(depth)
         pix = pixels[i]
         y, x = pix // width, pix % width
