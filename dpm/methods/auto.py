@@ -285,8 +285,7 @@ class Auto(Method):
                     albedo += a
                     normal += n
                 if photons is not None:
-                    sppm_gather(state, points, photons, watch)
-                    sppm_gather(narrow, points, photons, watch)
+                    sppm_gather((state, narrow), points, photons, watch)
             if full and j >= ADAPT_AFTER:
                 with watch("adaptive"):
                     budget = round(EXTRA_PER_PIXEL * pixels)

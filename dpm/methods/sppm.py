@@ -9,6 +9,7 @@ the result is the caustic radiance as the camera sees it.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -61,21 +62,29 @@ def sppm_caustics(
 
 
 def sppm_gather(
-    state: PPMState, points: VisiblePoints, photons: PhotonMap, watch: Stopwatch
+    states: PPMState | Sequence[PPMState],
+    points: VisiblePoints,
+    photons: PhotonMap,
+    watch: Stopwatch,
 ) -> None:
     """Gather one pass of photons into per-pixel PPM statistics at this pass's visible
-    points (one sample per pixel, in pixel order); stage "estimate" counts on watch."""
+    points (one sample per pixel, in pixel order), for one state or several (radii of their
+    own; one search at the largest); stage "estimate" counts on watch."""
+    states = [states] if isinstance(states, PPMState) else list(states)
     with watch("estimate"):
         hit = np.flatnonzero(points.hit)  # one sample per pixel: row = pixel
         index = PointIndex(points.position[hit], points.normal[hit])
-        pairs = index.within(photons, state.radius[hit], watch)
+        reach = np.max([s.radius[hit] for s in states], axis=0)
+        pairs = index.within(photons, reach, watch)
         pixel = hit[pairs.point]
         weight = points.throughput[pixel].astype(np.float64) * points.albedo[pixel] / np.pi
         flux = photons.flux[pairs.photon].astype(np.float64) * photons.n_paths * weight
-        state.update(pixel, flux)  # PPM's statistics, per pixel
-        state.paths += photons.n_paths
-        state.passes += 1
-        state.photons += len(photons)
+        for state in states:
+            inside = pairs.distance < state.radius[pixel]
+            state.update(pixel[inside], flux[inside])  # PPM's statistics, per pixel
+            state.paths += photons.n_paths
+            state.passes += 1
+            state.photons += len(photons)
 
 
 class StochasticPPM(Progressive):
