@@ -228,7 +228,7 @@ def _valid_triangles(
 
 def _light_reaches_geometry(tri: np.ndarray, normals: np.ndarray, emitting: np.ndarray) -> bool:
     """Whether some vertex lies in front of some emitter (light can reach nothing otherwise)."""
-    verts = np.unique(tri.reshape(-1, 3), axis=0).astype(np.float64)
+    verts = tri.reshape(-1, 3).astype(np.float64)  # shared vertices repeat: no matter for any()
     scale = max(float(np.abs(verts).max()), 1e-30)
     for chunk in np.array_split(emitting, max(1, len(emitting) * len(verts) // 2**22)):
         n = normals[chunk].astype(np.float64)  # (C, 3)
