@@ -206,22 +206,24 @@ def test_light_seen_in_glass_that_every_sample_finds_skips_the_denoiser(
 
 
 def test_the_narrow_kernel_is_taken_only_where_the_wide_ones_blur_shows() -> None:
-    # Two pixels gathered 400 photons at the wide radius and 100 at half of it. Where the
+    # Pixels that gathered 400 photons at the wide radius and 100 at half of it. Where the
     # estimates differ by less than their noise the wide one stays (it is the less noisy);
-    # where the narrow one sees twice the light (a peak the wide kernel blurs) it is taken.
-    def state(values: list[float], count: float, radius: float) -> PPMState:
+    # where the narrow one sees twice the light (a peak the wide kernel blurs) it is taken;
+    # a narrow kernel that found no photon (reading 0) is no evidence of blur.
+    def state(values: list[float], counts: list[float], radius: float) -> PPMState:
         s = PPMState.start(len(values), radius)
-        s.count[:] = count
+        s.count[:] = counts
         s.paths = 1000
         s.tau = np.array(values)[:, None] * np.pi * radius**2 * s.paths * np.ones(3)
         return s
 
-    wide, narrow = state([1.0, 1.0, 0.0], 400, 0.02), state([1.05, 2.0, 0.0], 100, 0.01)
+    wide = state([1.0, 1.0, 0.0, 1.0], [400, 400, 0, 400], 0.02)
+    narrow = state([1.05, 2.0, 0.0, 0.0], [100, 100, 0, 0], 0.01)
     image, sharp = auto.sharper_where_biased(wide, narrow, 2.0)
-    assert sharp.tolist() == [False, True, False]
-    np.testing.assert_allclose(image[:, 0], [1.0, 2.0, 0.0])
-    _, sharp = auto.sharper_where_biased(wide, narrow, 5.0)  # 1.0 apart, 4.9 errors of 0.21
-    assert sharp.tolist() == [False, False, False]
+    assert sharp.tolist() == [False, True, False, False]
+    np.testing.assert_allclose(image[:, 0], [1.0, 2.0, 0.0, 1.0])
+    _, sharp = auto.sharper_where_biased(wide, narrow, 5.0)  # 1.0 apart: 4.5 errors of 0.22
+    assert not sharp.any()
 
 
 def test_sobol_points_are_uniform_and_stratified_from_any_scramble() -> None:

@@ -78,8 +78,9 @@ EMISSION_SAMPLES, EMISSION_EXTRA, EMISSION_CAP = 16, 8, 256
 # A second SPPM estimate at NARROW times the radius; a pixel takes it where it differs from
 # the wide one's by more than LEPSKI_Z standard errors (`sharper_where_biased`). Measured on
 # the caustic component at the passes of --time 2 (caustic RMSE, seeds 1-2, wide -> chosen):
-# pool2 0.138 -> 0.098, glass egg 0.107 -> 0.095, torus 0.089 -> 0.087, dragon 0.091 ->
-# 0.089; ring, pool1, red wine within 1 %. At z = 1 the smooth caustics lose 10-25 %.
+# pool2 0.138 -> 0.103, glass egg 0.107 -> 0.097, torus 0.089 -> 0.089, dragon 0.091 ->
+# 0.090; ring, pool1, red wine unchanged. At z = 1.5: pool2 0.093, pool1 and red wine 1-2 %
+# worse; a third radius (a quarter) gained nothing.
 NARROW, LEPSKI_Z = 0.5, 2.0
 SEEN_ERROR = 0.6  # relative standard error of a pixel's light seen below which it skips
 # the denoiser
@@ -151,10 +152,13 @@ def sharper_where_biased(
     the narrow estimate where it differs from the wide one's by more than z standard errors
     (the wide kernel's blur shows: a sharp caustic), else the wide one's (Lepski's rule for
     choosing a kernel's bandwidth, with two). A PPM estimate's relative standard error is
-    taken as 1 / √(its photon count); both are consistent, so the choice is."""
+    taken as 1 / √(its photon count), of the larger of the two values (so a narrow kernel
+    that found no photon, reading 0, is not taken for exact); both are consistent, so the
+    choice is."""
     a, b = wide.irradiance(), narrow.irradiance()
     la, lb = luminance(a), luminance(b)
-    se = np.sqrt(la**2 / np.maximum(wide.count, 1) + lb**2 / np.maximum(narrow.count, 1))
+    scale = np.maximum(la, lb)
+    se = scale * np.sqrt(1 / np.maximum(wide.count, 1) + 1 / np.maximum(narrow.count, 1))
     sharp = np.abs(lb - la) > z * se
     return np.where(sharp[:, None], b, a), sharp
 
