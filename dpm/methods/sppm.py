@@ -56,21 +56,20 @@ def sppm_caustics(
                 scene, bvh, min(photons_per_pass, n_paths - j * photons_per_pass), seed,
                 caustic_only=True, first_path=j * photons_per_pass,
             )  # fmt: skip
-        sppm_gather(state, points, photons, watch)
+        sppm_gather((state,), points, photons, watch)
     image = state.irradiance()  # already weighted by throughput · ρ/π: radiance
     return image.reshape(camera.height, camera.width, 3).astype(np.float32), state.photons
 
 
 def sppm_gather(
-    states: PPMState | Sequence[PPMState],
+    states: Sequence[PPMState],
     points: VisiblePoints,
     photons: PhotonMap,
     watch: Stopwatch,
 ) -> None:
     """Gather one pass of photons into per-pixel PPM statistics at this pass's visible
-    points (one sample per pixel, in pixel order), for one state or several (radii of their
+    points (one sample per pixel, in pixel order), into each of `states` (radii of their
     own; one search at the largest); stage "estimate" counts on watch."""
-    states = [states] if isinstance(states, PPMState) else list(states)
     with watch("estimate"):
         hit = np.flatnonzero(points.hit)  # one sample per pixel: row = pixel
         index = PointIndex(points.position[hit], points.normal[hit])
