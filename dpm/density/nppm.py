@@ -109,14 +109,15 @@ class NPPMState(PPMState):
         shaped = np.flatnonzero(found & (self.moments[:, 0] > 0))
         if len(shaped) == 0:
             return weight
-        with watch(NETWORK):
-            p = np.zeros((len(self.radius), 2))
+        with watch(NETWORK):  # per shaped point (few in a small pass), not per photon
+            n = len(self.radius)
+            p, z, cos, sin = np.zeros((n, 2)), np.full(n, np.pi), np.ones(n), np.zeros(n)
             p[shaped] = predictor(self.weights)(features(self.moments[shaped]))
-            cos, sin = principal_axes(self.moments)
+            z[shaped] = normaliser(p[shaped, 0], p[shaped, 1])
+            cos[shaped], sin[shaped] = principal_axes(self.moments[shaped])
             sel = np.flatnonzero(self.moments[point, 0] > 0)
             q = point[sel]
             uv = to_axes(ab[sel], cos[q], sin[q])
-            z = normaliser(p[:, 0], p[:, 1])  # once per point, not per photon
             weight[sel] = relative_weight(uv[:, 0], uv[:, 1], p[q, 0], p[q, 1], z=z[q])
         return weight
 
