@@ -9,9 +9,13 @@ ring around it, each in 4 quadrants of the point's tangent plane), so a gradient
 quadrant asymmetry and curvature as inner/outer imbalance. A point's cell counts accumulate
 over the passes that kept its radius; once every cell expects at least MIN_EXPECTED photons,
 χ² = Σ (O − E)²/E is compared with the (1 − SIGNIFICANCE) quantile of χ²(7):
-- uniform: keep R, N' = N + M, τ' = τ + Φ (every photon counts at full weight);
-- not uniform, or too few photons to test: PPM's step (N' = N + αM, R'² = R² N'/(N + M),
-  τ' = (τ + Φ) R'²/R²), and the counts start again.
+- uniform, or too few photons to test yet: keep R, N' = N + M, τ' = τ + Φ (every photon
+  counts at full weight) and the cell counts go on;
+- not uniform: PPM's step for the A photons gathered since R last changed, as if they had
+  come in one pass (N' = N − (1 − α)A, R'² = R² N'/N, τ' = τ R'²/R², N and τ including
+  them), and the counts start again.
+Shrinking whenever a pass is too small to test (our first version) started the counts
+again every pass, so at a few photons per pass CPPM never tested and was PPM.
 Consistent whatever the scene: any non-uniformity is found once enough photons arrive (the
 test's power tends to 1), so the radius shrinks wherever the density varies, and where the
 density is flat a disc average is the point's value.
@@ -64,18 +68,22 @@ class CPPMState(PPMState):
         quadrant = 2 * (ab[:, 0] > 0) + (ab[:, 1] > 0)
         cell = CELLS // 2 * outer + quadrant
         self.cells += np.bincount(point * CELLS + cell, minlength=n * CELLS).reshape(n, CELLS)
-        found = np.bincount(point, minlength=n).astype(np.float64)
         phi = np.stack([np.bincount(point, flux[:, c], minlength=n) for c in range(3)], 1)
-        expected = self.cells.sum(axis=1) / CELLS
+        self.count = self.count + np.bincount(point, minlength=n)
+        self.tau = self.tau + phi
+        since = self.cells.sum(axis=1)  # photons gathered since R last changed
+        expected = since / CELLS
         with np.errstate(divide="ignore", invalid="ignore"):
             statistic = ((self.cells - expected[:, None]) ** 2).sum(axis=1) / expected
-        uniform = (expected >= MIN_EXPECTED) & (statistic <= CRITICAL)
-        shrink = (found > 0) & ~uniform
-        grown = self.count + np.where(shrink, self.alpha * found, found)
-        ratio = np.divide(grown, self.count + found, out=np.ones(n), where=shrink)
+        # Too few photons to test: keep R and keep counting. (Shrinking then, and starting
+        # the counts again, would leave CPPM untested, i.e. PPM, at a few photons per pass.)
+        shrink = (expected >= MIN_EXPECTED) & (statistic > CRITICAL)
+        # PPM's step for the photons since the last change, as if they came in one pass
+        shrunk = self.count - (1 - self.alpha) * since
+        ratio = np.divide(shrunk, self.count, out=np.ones(n), where=shrink)
         self.radius = self.radius * np.sqrt(ratio)
-        self.tau = (self.tau + phi) * ratio[:, None]
-        self.count = grown
+        self.tau = self.tau * ratio[:, None]
+        self.count = self.count * ratio
         self.cells[shrink] = 0
         self.paths += photons.n_paths
         self.passes += 1
