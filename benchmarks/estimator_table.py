@@ -4,6 +4,7 @@ stage. M = 700,000 gives the glass egg about 15k caustic photons, as in the pape
 
     python benchmarks/estimator_table.py [SCENE ...] [--reference-paths N]
         [--max-reference-paths N] [--reference-radius F]
+    python benchmarks/estimator_table.py [SCENE ...] --add METHOD [--budgets N ...]
 
 Each scene writes benchmarks/results/estimators/SCENE.json and its reference radiance
 benchmarks/results/references_radiance/SCENE.npz (read by dpm_table.py); the Markdown table
@@ -14,6 +15,11 @@ budget continues the same reference. A reference starts at --reference-paths and
 the estimators' outputs are kept and rescored, not rerun, and saved beside the reference
 checkpoint, so a rerun (say with a longer reference) skips them; delete that folder after
 changing an estimator.
+
+--add tunes one more registered progressive method (say cppm) as PPM/APPM are tuned (30
+settings, widened at an edge) on the same photon maps, against each scene's saved reference
+(references_radiance/SCENE.npz), at the budgets asked for (default M and 10·M), and adds
+its METHOD_best and trials to the scene's JSON; the references are not rerun.
 
 --reference-radius sets the reference's initial PPM radius (× scene diagonal). PPM's radius
 stays proportional to it, so the noise falls as 1/radius, but the bias grows quickly: at
@@ -42,6 +48,7 @@ from common import (
     TOTAL,
     WIDTH,
     M,
+    load_reference,
     markdown_table,
     save_reference,
     table_points,
@@ -166,6 +173,29 @@ def run_scene(
     }  # fmt: skip
 
 
+def add_method(name: str, method: str, budgets: list[int]) -> dict:
+    """The scene's JSON record with `method` tuned at `budgets` on the table's photon maps
+    (seed 0) against its saved reference: METHOD_best and its trials in each budget's row."""
+    path = RESULTS / "estimators" / f"{name}.json"
+    record = json.loads(path.read_text())
+    scene = load_scene(SCENES / f"{name}.obj")
+    bvh = build_bvh(scene)
+    points = table_points(scene, bvh)
+    reference, _ = load_reference(name)
+    for row in record["budgets"]:
+        if row["paths"] not in budgets:
+            continue
+        photons = trace_photons(scene, bvh, row["paths"], seed=0, caustic_only=True)
+        assert len(photons) == row["caustic_photons"], "not the table's photon map"
+        grid = radii(record["diagonal"])
+        trials = tune_widening(points, photons, reference, grid, methods=(method,))
+        row["trials"] = [t for t in row["trials"] if t["method"] != method]
+        row["trials"] += [asdict(t) for t in trials]
+        row[f"{method}_best"] = asdict(best(trials, method))
+        print(name, row["paths"], method, row[f"{method}_best"], flush=True)
+    return record
+
+
 def write_markdown(path: Path = RESULTS / "estimators.md") -> None:
     """Rebuild estimators.md from every scene's JSON: Table 1 (`tables.table1`), the seconds
     per stage and the best settings."""
@@ -177,9 +207,10 @@ def write_markdown(path: Path = RESULTS / "estimators.md") -> None:
         "radiance the camera sees, over one visible point per pixel, against a PPM reference of",
         "two independent half-budget runs with guided emission. *ref noise* is the RMSE between",
         "the halves; the protocol asks it to be at most a fifth of the smallest error of the",
-        "scene's rows. PPM/APPM-best: the least RMSE of 30 settings (10 initial radii × 3",
+        "scene's rows. PPM/APPM/CPPM-best: the least RMSE of 30 settings (10 initial radii × 3",
         "photons per pass, more radii where the best was at an edge), chosen per scene and",
-        "budget; † marks a best that is still at an edge of the radii tried.",
+        "budget; † marks a best that is still at an edge of the radii tried. CPPM was tuned",
+        "later on the same maps against the final reference (`--add cppm`), at M and 10·M only.",
         "",
         *table1(records),
         "",
@@ -189,7 +220,7 @@ def write_markdown(path: Path = RESULTS / "estimators.md") -> None:
         "the estimator (kernel sums, PPM/APPM statistics). For PPM/APPM-best, gather + estimate.",
         "",
     ]
-    columns = tabled(records[0]["budgets"][0])
+    columns = {k: v for r in records for b in r["budgets"] for k, v in tabled(b).items()}
     head = ["scene", "paths", "trace"]
     for label, key in columns.items():
         head += [label] if key.endswith("_best") else [f"{label} gather", f"{label} estimate"]
@@ -198,7 +229,10 @@ def write_markdown(path: Path = RESULTS / "estimators.md") -> None:
         for b in r["budgets"]:
             cells = [r["scene"], f"{b['paths']:,}", f"{b['trace_seconds']:.2f}"]
             for key in columns.values():
-                stage = b[key]
+                stage = b.get(key)
+                if stage is None:  # a method added later (--add) at fewer budgets
+                    cells += ["–"] if key.endswith("_best") else ["–", "–"]
+                    continue
                 cells += (
                     [f"{stage['seconds']:.2f}"]
                     if key.endswith("_best")
@@ -236,9 +270,16 @@ def main() -> None:
         help="run the reference's two halves on this Ray cluster (default: as two tasks of a "
         "local Ray runtime; the checkpoint folder must be shared)",
     )  # fmt: skip
+    p.add_argument("--add", metavar="METHOD", help="tune this method into the existing records")
+    p.add_argument("--budgets", type=int, nargs="+", default=[M, 10 * M], help="with --add")
     args = p.parse_args()
     (RESULTS / "estimators").mkdir(parents=True, exist_ok=True)
-    for name in args.scenes:
+    for name in args.scenes if args.add else ():
+        record = add_method(name, args.add, args.budgets)
+        with atomic(RESULTS / "estimators" / f"{name}.json") as tmp:
+            tmp.write_text(json.dumps(record, indent=1))
+        write_markdown()
+    for name in () if args.add else args.scenes:
         record = run_scene(name, int(args.reference_paths), int(args.max_reference_paths),
                            args.reference_radius, args.ray_address)  # fmt: skip
         (RESULTS / "estimators" / f"{name}.json").write_text(json.dumps(record, indent=1))
