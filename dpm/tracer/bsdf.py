@@ -69,7 +69,8 @@ def specular_survival(sc, m, front, weight, start, radiance):
     a dielectric the radiance weight's (η₁/η₂)² is undone, as it comes back on the way out.
     Never above 1, so surviving weights never grow: a path trapped in clear glass by total
     internal reflection is not rouletted (growing weights would make rare, huge fireflies) but
-    runs to the depth cap, which loses about 1e-4 of the glass scenes' caustic flux.
+    runs to the depth cap: photons at 256 bounces lose 6e-4 of the glass egg's caustic flux;
+    camera chains run to 1024 vertices (`dpm.tracer.visible.MAX_SPECULAR_DEPTH`).
     """
     scale = 1.0
     if radiance and not front and sc.kind[m] == DIELECTRIC:

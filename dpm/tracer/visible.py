@@ -33,7 +33,11 @@ from dpm.tracer.sampling import sobol2, uniform
 from dpm.tracer.surface import next_surface
 from dpm.tracer.traverse import hit_triangle, new_stack, ray_setup, spawn_offset
 
-MAX_SPECULAR_DEPTH = 256  # specular vertices a camera path may pass before it is dropped
+# Specular vertices a camera path may pass before it is dropped. Clear glass traps some
+# chains by total internal reflection (weight 1, so roulette spares them) and some escape
+# late: in the glass egg at 256 the chains left out held 2.2 % of the pt image's mean (the
+# light seen through the egg); 1024 loses nothing more than 4096 does, at about 2 % more time.
+MAX_SPECULAR_DEPTH = 1024
 RR_SPECULAR = 16  # specular vertices before Russian roulette may end a path (also for photons)
 SHADE_DIM0 = 2 + 2 * MAX_SPECULAR_DEPTH
 LUMINANCE = (0.2126, 0.7152, 0.0722)  # Rec. 709 weights (dpm.density.base.luminance too)
