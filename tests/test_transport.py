@@ -339,3 +339,34 @@ def test_light_seen_in_water_counts_with_its_fresnel_weight_on_every_path(tmp_pa
         assert not image[..., 2].any()
     # Per pixel, two seeds differ only by where the samples fall inside the pixel.
     assert np.allclose(images[0], images[1], rtol=0.01)
+
+
+def light_pipe(folder: Path, length: float, thickness: float) -> Path:
+    """A clear glass bar (ior 1.5) along x from 0 to `length`, `thickness` tall, with a light
+    facing its far end and a camera that looks into its near end at 60° from its axis."""
+    bar = trimesh.creation.box(extents=(length, thickness, 4.0))
+    bar.apply_translation((length / 2, thickness / 2, 0.0))
+    x = length + 0.05
+    lines = ["mtllib scene.mtl", *(f"v {a} {b} {c}" for a, b, c in bar.vertices)]
+    lines += [f"v {x} -1 -1", f"v {x} -1 1", f"v {x} 1 1", f"v {x} 1 -1"]  # faces -x
+    lines += ["usemtl glass", *(f"f {a + 1} {b + 1} {c + 1}" for a, b, c in bar.faces)]
+    lines += ["usemtl light", "f 9 10 11 12"]
+    mtl = f"newmtl glass\nillum 7\nNi 1.5\nTf 1 1 1\nnewmtl light\nKe {LE} {LE} {LE}\n"
+    eye = (-math.cos(math.pi / 3), thickness / 2 + math.sin(math.pi / 3), 0.0)
+    camera = (
+        f"[camera]\norigin = {list(eye)}\ntarget = [0, {thickness / 2}, 0]\nup = [0, 0, 1]\n"
+        "fov = 0.05\nwidth = 8\nheight = 8\n"
+    )
+    return write_scene(folder, "\n".join(lines) + "\n", mtl, camera)
+
+
+def test_light_seen_after_hundreds_of_internal_reflections_counts(tmp_path: Path) -> None:
+    # Entering at 60° the camera's rays travel 35.3° off the bar's axis and meet its long faces
+    # at 54.7°, past the critical 41.8°: total internal reflection every 1.41 thicknesses, so
+    # about 495 lossless bounces before they leave through the far end (at 35.3°) and see the
+    # light. Each bounce keeps the weight at 1 (roulette spares them), so a chain cap below
+    # ~500 vertices would leave the bar black; the light arrives times (1 - F) at both ends.
+    scene = load_scene(light_pipe(tmp_path, length=7.0, thickness=0.01))
+    image = render(scene, RenderOptions(method="pt", spp=64, seed=1, progress=False)).image
+    f = float(fresnel(np.array(math.cos(math.pi / 3)), 1.5))
+    assert image.mean() == pytest.approx(LE * (1 - f) ** 2, rel=0.03)
