@@ -133,7 +133,8 @@ def run_scene(name: str, width: int, times: list[float]) -> dict:
             theirs, theirs_s = mitsuba_run(desc, spp, i + 1)
             if abs(theirs_s - ours_s) > 0.05 * ours_s:  # the fit missed: one secant step
                 rate = max(theirs_s - fixed, 1e-3) / spp
-                spp = max(1, round((ours_s - fixed) / rate))
+                # within 4x of the fit: a noisy fixed cost near theirs_s once asked 79,119 spp
+                spp = min(max(round((ours_s - fixed) / rate), spp // 4, 1), 4 * spp)
                 theirs, theirs_s = mitsuba_run(desc, spp, i + 1)
             rows.append({
                 "budget": budget, "dpm_s": ours_s, "dpm_rmse": rmse(ours, ref),
