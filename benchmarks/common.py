@@ -9,11 +9,13 @@ its committed references, the methods the benchmarks compare, and the one way to
   estimator of their own (pm, ppm, appm, dpm, ... and any method registered later);
 - `timed_estimate`: an estimate and its seconds per stage, each timed call building its own
   photon index (so it pays for its tree, as a render does); `timed`: wall seconds of any call;
-- `markdown_table`: a Markdown table.
+- `markdown_table`: a Markdown table; `save_records`: per-scene JSON records and the Markdown
+  table rebuilt from all of them.
 """
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -23,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from dpm.density.reference import Reference
+from dpm.io import atomic
 from dpm.methods import METHODS
 from dpm.methods.base import Method, NearestPhotons, Progressive
 from dpm.scene import Scene
@@ -128,3 +131,23 @@ def markdown_table(head: list[str], rows: list[list[str]]) -> list[str]:
     return ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)] + [
         "| " + " | ".join(r) + " |" for r in rows
     ]
+
+
+def save_records(
+    folder: Path,
+    names: list[str],
+    run: Callable[[str], dict],
+    markdown: Callable[[list[dict]], str],
+    table: Path,
+) -> None:
+    """Run each named scene, keep its record as folder/NAME.json, then rebuild `table` (the
+    Markdown of every record in the folder, also scenes run earlier) and print it."""
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in names:
+        record = run(name)
+        with atomic(folder / f"{name}.json") as tmp:
+            tmp.write_text(json.dumps(record, indent=1))
+    text = markdown([json.loads(f.read_text()) for f in sorted(folder.glob("*.json"))])
+    with atomic(table) as tmp:
+        tmp.write_text(text)
+    print(text)

@@ -32,17 +32,17 @@ import datetime
 import itertools
 import json
 import platform
+from functools import partial
 
 import numpy as np
 from tables import least_error
 
-from common import RESULTS, SCENES, M, load_reference, table_points
+from common import RESULTS, SCENES, M, load_reference, save_records, table_points
 from dpm import load_scene
 from dpm.density.base import in_plane, reflected, tangent_frame
 from dpm.density.gather import PointIndex
 from dpm.density.progressive import ALPHA
 from dpm.density.shaped import normaliser
-from dpm.io import atomic
 from dpm.tracer import PhotonMap, VisiblePoints, build_bvh, trace_photons
 
 OUT = RESULTS / "kernel_headroom"
@@ -200,15 +200,8 @@ def main() -> None:
     if len(args.maps) != len(args.budgets) or min(args.maps) < 2:
         p.error("--maps: one count of at least 2 per budget")
     names = args.scenes or sorted(f.stem for f in (RESULTS / "estimators").glob("*.json"))
-    OUT.mkdir(parents=True, exist_ok=True)
-    for name in names:
-        record = run_scene(name, args.budgets, args.maps)
-        with atomic(OUT / f"{name}.json") as tmp:
-            tmp.write_text(json.dumps(record, indent=1))
-    records = [json.loads(f.read_text()) for f in sorted(OUT.glob("*.json"))]
-    with atomic(RESULTS / "kernel_headroom.md") as tmp:
-        tmp.write_text(markdown(records))
-    print(markdown(records))
+    run = partial(run_scene, budgets=args.budgets, maps=args.maps)
+    save_records(OUT, names, run, markdown, RESULTS / "kernel_headroom.md")
 
 
 if __name__ == "__main__":

@@ -21,15 +21,24 @@ import argparse
 import datetime
 import json
 import platform
+from functools import partial
 
 from tables import least_error
 
-from common import PM_KS, RESULTS, SCENES, M, load_reference, table_points, timed_estimate
+from common import (
+    PM_KS,
+    RESULTS,
+    SCENES,
+    M,
+    load_reference,
+    save_records,
+    table_points,
+    timed_estimate,
+)
 from dpm import load_scene
 from dpm.density import PPM
 from dpm.density.nppm import NPPM
 from dpm.density.reference import caustic_rmse
-from dpm.io import atomic
 from dpm.methods import make_estimator
 from dpm.tracer import build_bvh, trace_photons
 
@@ -117,15 +126,8 @@ def main() -> None:
     p.add_argument("--weights", default="", help="nppm weight file (default: the shipped one)")
     args = p.parse_args()
     names = args.scenes or sorted(f.stem for f in (RESULTS / "estimators").glob("*.json"))
-    OUT.mkdir(parents=True, exist_ok=True)
-    for name in names:
-        record = run_scene(name, args.budgets, args.weights)
-        with atomic(OUT / f"{name}.json") as tmp:
-            tmp.write_text(json.dumps(record, indent=1))
-    records = [json.loads(f.read_text()) for f in sorted(OUT.glob("*.json"))]
-    with atomic(RESULTS / "nppm.md") as tmp:
-        tmp.write_text(markdown(records))
-    print(markdown(records))
+    run = partial(run_scene, budgets=args.budgets, weights=args.weights)
+    save_records(OUT, names, run, markdown, RESULTS / "nppm.md")
 
 
 if __name__ == "__main__":
