@@ -122,7 +122,9 @@ def run_scene(name: str, width: int, times: list[float]) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         desc = mitsuba_setup(scene, camera, folder)
-        dpm_run(path, width, height, times[0], 0, folder)  # warm caches
+        # warm every kernel cache: at the longest budget (adaptive sampling starts after 8
+        # passes; a cold cache once cost the dragon's 4 s run 48 s of compiling)
+        dpm_run(path, width, height, max(times), 0, folder)
         mitsuba_run(desc, CALIBRATION_SPP[0], 0)
         lo, hi = ((spp, mitsuba_run(desc, spp, 0)[1]) for spp in CALIBRATION_SPP)
         per_spp = max((hi[1] - lo[1]) / (hi[0] - lo[0]), 1e-6)
