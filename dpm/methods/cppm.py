@@ -75,8 +75,7 @@ class CPPMState(PPMState):
         expected = since / CELLS
         with np.errstate(divide="ignore", invalid="ignore"):
             statistic = ((self.cells - expected[:, None]) ** 2).sum(axis=1) / expected
-        # Too few photons to test: keep R and keep counting. (Shrinking then, and starting
-        # the counts again, would leave CPPM untested, i.e. PPM, at a few photons per pass.)
+        # too few photons to test: R stays and the counts go on (see the module docstring)
         shrink = (expected >= MIN_EXPECTED) & (statistic > CRITICAL)
         # PPM's step for the photons since the last change, as if they came in one pass
         shrunk = self.count - (1 - self.alpha) * since
