@@ -182,12 +182,12 @@ def add_method(name: str, method: str, budgets: list[int]) -> dict:
     bvh = build_bvh(scene)
     points = table_points(scene, bvh)
     reference, _ = load_reference(name)
+    grid = radii(record["diagonal"])
     for row in record["budgets"]:
         if row["paths"] not in budgets:
             continue
         photons = trace_photons(scene, bvh, row["paths"], seed=0, caustic_only=True)
         assert len(photons) == row["caustic_photons"], "not the table's photon map"
-        grid = radii(record["diagonal"])
         trials = tune_widening(points, photons, reference, grid, methods=(method,))
         row["trials"] = [t for t in row["trials"] if t["method"] != method]
         row["trials"] += [asdict(t) for t in trials]
@@ -274,12 +274,13 @@ def main() -> None:
     p.add_argument("--budgets", type=int, nargs="+", default=[M, 10 * M], help="with --add")
     args = p.parse_args()
     (RESULTS / "estimators").mkdir(parents=True, exist_ok=True)
-    for name in args.scenes if args.add else ():
-        record = add_method(name, args.add, args.budgets)
-        with atomic(RESULTS / "estimators" / f"{name}.json") as tmp:
-            tmp.write_text(json.dumps(record, indent=1))
-        write_markdown()
-    for name in () if args.add else args.scenes:
+    for name in args.scenes:
+        if args.add:
+            record = add_method(name, args.add, args.budgets)
+            with atomic(RESULTS / "estimators" / f"{name}.json") as tmp:
+                tmp.write_text(json.dumps(record, indent=1))
+            write_markdown()
+            continue
         record = run_scene(name, int(args.reference_paths), int(args.max_reference_paths),
                            args.reference_radius, args.ray_address)  # fmt: skip
         (RESULTS / "estimators" / f"{name}.json").write_text(json.dumps(record, indent=1))

@@ -43,6 +43,7 @@ from dpm.density.base import in_plane, reflected, tangent_frame
 from dpm.density.gather import PointIndex
 from dpm.density.progressive import ALPHA
 from dpm.density.shaped import normaliser
+from dpm.metrics import rmse
 from dpm.tracer import PhotonMap, VisiblePoints, build_bvh, trace_photons
 
 OUT = RESULTS / "kernel_headroom"
@@ -100,11 +101,6 @@ def kernel_estimates(
     return out
 
 
-def rmse(estimate: np.ndarray, reference: np.ndarray, hit: np.ndarray) -> float:
-    """RMSE over the hit points of camera-weighted radiance (N, 3)."""
-    return float(np.sqrt(np.mean((estimate[hit] - reference[hit]) ** 2)))
-
-
 def oracle(estimates: np.ndarray, others: list[np.ndarray], reference: np.ndarray) -> np.ndarray:
     """(N, 3) map 0's estimates (C, N, 3) taking per point the candidate of least mean squared
     error over the other maps' estimates (each (C, N, 3)) against reference (N, 3)."""
@@ -121,6 +117,10 @@ def run_scene(name: str, budgets: list[int], maps: list[int]) -> dict:
     points = table_points(scene, bvh)
     hit = points.hit
     ref = reference * points.throughput
+
+    def score(estimate: np.ndarray) -> float:  # as caustic_rmse: camera-weighted, hit points
+        return rmse(estimate[hit], ref[hit])
+
     kernels = candidates()
     uniform = [i for i, (_, a) in enumerate(kernels) if a is None]
     rows = []
@@ -137,17 +137,13 @@ def run_scene(name: str, budgets: list[int], maps: list[int]) -> dict:
         classic = least_error(row)
         few = est[1 : 1 + min(4, k - 1)]
         pairs = itertools.combinations(uniform, 2)
-        affine = min(
-            rmse(w * est[0][i] + (1 - w) * est[0][j], ref, hit) for i, j in pairs for w in WEIGHTS
-        )
+        affine = min(score(w * est[0][i] + (1 - w) * est[0][j]) for i, j in pairs for w in WEIGHTS)
         out = {
             "paths": n, "maps": k, "best_classic": classic, "ppm_best": row["ppm_best"]["rmse"],
-            "scales": {str(SCALES[i]): rmse(est[0][i], ref, hit) for i in uniform},
-            "oracle_scale_few": rmse(oracle(est[0][uniform], [e[uniform] for e in few], ref),
-                                     ref, hit),
-            "oracle_scale": rmse(oracle(est[0][uniform], [e[uniform] for e in est[1:]], ref),
-                                 ref, hit),
-            "oracle_all": rmse(oracle(est[0], est[1:], ref), ref, hit),
+            "scales": {str(SCALES[i]): score(est[0][i]) for i in uniform},
+            "oracle_scale_few": score(oracle(est[0][uniform], [e[uniform] for e in few], ref)),
+            "oracle_scale": score(oracle(est[0][uniform], [e[uniform] for e in est[1:]], ref)),
+            "oracle_all": score(oracle(est[0], est[1:], ref)),
             "global_affine": affine,
         }  # fmt: skip
         print(name, n, {k: v for k, v in out.items() if k != "scales"}, flush=True)
