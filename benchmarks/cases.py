@@ -133,6 +133,14 @@ def estimators(case: Case, budget: int, weights: Path | None = None) -> dict[str
     return methods
 
 
+def tuning(cases: list[Case]) -> tuple[list[str], list[str]]:
+    """(tuned, untuned) progressive methods of the cases, by report name: NAME-best where the
+    estimator table tuned it for every case, else NAME (default radius, PASSES passes)."""
+    names = [n for n, cls in photon_methods().items() if not issubclass(cls, NearestPhotons)]
+    done = [n for n in names if all(c.record["budgets"][0].get(f"{n}_best") for c in cases)]
+    return [f"{n.upper()}-best" for n in done], [n.upper() for n in names if n not in done]
+
+
 def photons(case: Case, budget: int, seed: int = 0) -> PhotonMap:
     """The caustic photons of `budget` emitted paths (the table's photon map at M for seed 0)."""
     return trace_photons(case.scene, case.bvh, budget, seed=seed, caustic_only=True)

@@ -10,12 +10,15 @@ its committed references, the methods the benchmarks compare, and the one way to
 - `timed_estimate`: an estimate and its seconds per stage, each timed call building its own
   photon index (so it pays for its tree, as a render does); `timed`: wall seconds of any call;
 - `markdown_table`: a Markdown table; `save_records`: per-scene JSON records and the Markdown
-  table rebuilt from all of them.
+  table rebuilt from all of them; `cpu`: the machine's CPU model and cores, for the results
+  (the same benchmark gives different ratios on different CPUs).
 """
 
 from __future__ import annotations
 
 import json
+import os
+import platform
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -39,6 +42,22 @@ M = 700_000  # emitted photon paths: the glass egg's ~15k caustic photons, as in
 WIDTH = 128  # visible points: one per pixel of a WIDTH-wide image, seed 0
 PM_KS = (50, 500)  # the K of the paper's PM baselines
 TOTAL = "total"  # timed_estimate's key for the wall seconds of the whole call
+
+
+def cpu() -> str:
+    """This machine's CPU (/proc/cpuinfo's model name, family and model where there is one:
+    a virtual machine may hide the rest of the name) and cores."""
+    info = {}
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                key, _, value = line.partition(":")
+                info.setdefault(key.strip(), value.strip())
+    except OSError:
+        pass
+    name = info.get("model name") or platform.processor() or platform.machine()
+    model = [f"{k} {info[k]}" for k in ("cpu family", "model") if k in info]
+    return f"{name} ({'; '.join([*model, platform.machine()])}), {os.cpu_count()} cores"
 
 
 def table_points(scene: Scene, bvh: BVH) -> VisiblePoints:

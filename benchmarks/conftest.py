@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import datetime
 import os
-import platform
 import time
 from collections.abc import Callable
 
 import numba
 
-from common import RESULTS
+from common import RESULTS, cpu
 
 BVH_ROWS: list[dict] = []  # one row per (scene, engine), filled by test_bvh.py
 BVH_TABLE = RESULTS / "bvh.md"
@@ -39,7 +38,7 @@ def pytest_terminal_summary(terminalreporter) -> None:
     scenes = list(dict.fromkeys(r["scene"] for r in BVH_ROWS))
     by = {(r["scene"], r["engine"]): r for r in BVH_ROWS}
     lines = [
-        f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+        f"Machine: {cpu()}, "
         f"numba threads {numba.get_num_threads()}; {datetime.date.today().isoformat()}",
         "",
         "| scene | triangles | rays | dpm build s | embree build s | dpm Mrays/s "

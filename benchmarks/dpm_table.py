@@ -15,14 +15,12 @@ Needs each scene's benchmarks/results/estimators/SCENE.json and references_radia
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 from pathlib import Path
 
 from cases import load_case
 from tables import table1, timing_table, untabled_columns
 
-from common import RESULTS, M
+from common import RESULTS, M, cpu
 from dpm.nn.weights import SHIPPED, weight_ks
 
 
@@ -49,7 +47,7 @@ def write_markdown(
         "",
         *timing_table(timing),
         "",
-        f"Machine: {platform.machine()}, {os.cpu_count()} cores.",
+        f"Machine: {cpu()}.",
     ]
     path.write_text("\n".join(lines) + "\n")
 

@@ -23,8 +23,6 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
-import os
-import platform
 import subprocess
 import sys
 import tempfile
@@ -35,7 +33,7 @@ import imageio.v3 as iio
 import numpy as np
 from hybrid import reference
 
-from common import RESULTS, SCENES, markdown_table
+from common import RESULTS, SCENES, cpu, markdown_table
 from dpm import load_scene
 from dpm.io import linear_to_srgb8, read_exr
 from dpm.methods.auto import has_specular
@@ -183,7 +181,7 @@ def report(records: list[dict]) -> str:
         "",
         "Made by `python benchmarks/equal_time.py` (see its docstring): whole-process wall",
         "time from launch to exit, both warm; RMSE against the converged reference.",
-        f"Machine: {platform.machine()}, {os.cpu_count()} cores; Mitsuba {VARIANT};"
+        f"Machine: {cpu()}; Mitsuba {VARIANT};"
         f" {datetime.date.today()}.",
         "",
         *markdown_table(head, rows),

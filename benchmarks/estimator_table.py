@@ -32,8 +32,6 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
-import os
-import platform
 from dataclasses import asdict
 from functools import partial
 from pathlib import Path
@@ -48,6 +46,7 @@ from common import (
     TOTAL,
     WIDTH,
     M,
+    cpu,
     load_reference,
     markdown_table,
     save_reference,
@@ -168,7 +167,7 @@ def run_scene(
             "seconds_this_run": reference_seconds,
         },
         "budgets": rows,
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores",
+        "machine": cpu(),
         "date": datetime.date.today().isoformat(),
     }  # fmt: skip
 

@@ -9,7 +9,6 @@ resident memory (ru_maxrss) is its own. Writes benchmarks/results/gather_memory.
 from __future__ import annotations
 
 import json
-import os
 import resource
 import subprocess
 import sys
@@ -17,7 +16,7 @@ import time
 
 import numpy as np
 
-from common import RESULTS
+from common import RESULTS, cpu
 from dpm.density import gather
 
 OUTPUT = RESULTS / "gather_memory.md"
@@ -84,7 +83,7 @@ def main() -> None:
     for r in rows:
         lines.append(f"| {r['stage']} | {r['seconds']:.1f} | {r['data_mib']:.0f} "
                      f"| {r['peak_mib']:.0f} | {r['peak_mib'] - r['data_mib']:.0f} |")  # fmt: skip
-    lines += ["", f"Machine: {os.cpu_count()} cores."]
+    lines += ["", f"Machine: {cpu()}."]
     OUTPUT.write_text("\n".join(lines) + "\n")
 
 

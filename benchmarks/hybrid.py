@@ -25,15 +25,13 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import os
-import platform
 import tempfile
 from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
 
-from common import RESULTS, SCENES, timed
+from common import RESULTS, SCENES, cpu, timed
 from dpm import load_scene
 from dpm.camera import Camera
 from dpm.denoise import denoise
@@ -202,7 +200,7 @@ def write_report(records: list[dict], k: int, weights: Path | None) -> None:
         "# Hybrid vs path tracing + OIDN at equal time",
         "",
         f"Made by `python benchmarks/hybrid.py` (K = {k}, weights: "
-        f"{weights or 'shipped'}); {platform.machine()}, {os.cpu_count()} cores, "
+        f"{weights or 'shipped'}); {cpu()}, "
         f"{datetime.date.today().isoformat()}. Seconds are wall time of the whole render",
         "(photons, gathering, network, path tracing, denoising), compilation excluded.",
         "",

@@ -26,15 +26,13 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import os
-import platform
 import time
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from common import RESULTS, SCENES, M, markdown_table
+from common import RESULTS, SCENES, M, cpu, markdown_table
 from dpm import load_scene
 from dpm.density.gather import PhotonIndex
 from dpm.nn.infer import (
@@ -179,8 +177,7 @@ def report(rows: list[dict], peak: float, alone: float, name: str) -> list[str]:
         f"pooling), {ACTIVATIONS_PER_CHUNK:,} photon rows a step: {alone:.1f} GFLOP/s, "
         f"{alone / peak:.2f} of peak.",
         "",
-        f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; "
-        f"JAX {jax.__version__}; {datetime.date.today().isoformat()}",
+        f"Machine: {cpu()}; JAX {jax.__version__}; {datetime.date.today().isoformat()}",
     ]
 
 

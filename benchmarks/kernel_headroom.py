@@ -31,13 +31,12 @@ import argparse
 import datetime
 import itertools
 import json
-import platform
 from functools import partial
 
 import numpy as np
 from tables import least_error
 
-from common import RESULTS, SCENES, M, load_reference, save_records, table_points
+from common import RESULTS, SCENES, M, cpu, load_reference, save_records, table_points
 from dpm import load_scene
 from dpm.density.base import in_plane, reflected, tangent_frame
 from dpm.density.gather import PointIndex
@@ -150,7 +149,7 @@ def run_scene(name: str, budgets: list[int], maps: list[int]) -> dict:
         rows.append(out)
     return {
         "scene": name, "reference_noise": noise, "budgets": rows,
-        "machine": platform.processor() or platform.machine(),
+        "machine": cpu(),
         "date": datetime.date.today().isoformat(),
     }  # fmt: skip
 

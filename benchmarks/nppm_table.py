@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
-import platform
 from functools import partial
 
 from tables import least_error
@@ -30,6 +29,7 @@ from common import (
     RESULTS,
     SCENES,
     M,
+    cpu,
     load_reference,
     save_records,
     table_points,
@@ -79,7 +79,7 @@ def run_scene(name: str, budgets: list[int], weights: str) -> dict:
         rows.append(out)
     return {
         "scene": name, "reference_noise": noise, "budgets": rows, "weights": weights or "shipped",
-        "machine": platform.processor() or platform.machine(),
+        "machine": cpu(),
         "date": datetime.date.today().isoformat(),
     }  # fmt: skip
 

@@ -22,8 +22,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import os
-import platform
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -31,7 +29,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from common import RESULTS, SCENES, markdown_table, timed
+from common import RESULTS, SCENES, cpu, markdown_table, timed
 from dpm import load_scene
 from dpm.camera import Camera
 from dpm.render import RenderOptions, render
@@ -120,7 +118,7 @@ def report(records: list[dict], rounds: int) -> str:
         "",
         f"Made by `python benchmarks/path_speed.py` (see its docstring): best of {rounds}"
         " alternating renders each, compilation and BVH builds excluded.",
-        f"Machine: {platform.machine()}, {os.cpu_count()} cores; numba threads"
+        f"Machine: {cpu()}; numba threads"
         f" {numba.get_num_threads()}, Dr.Jit threads {dr.thread_count()} (Mitsuba {VARIANT},"
         f" LLVM {'.'.join(map(str, dr.detail.llvm_version()))}); {datetime.date.today()}.",
         "",

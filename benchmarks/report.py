@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import datetime
 import json
-import os
 import platform
 import shutil
 import sys
@@ -18,6 +17,8 @@ from pathlib import Path
 
 import numba
 
+from common import cpu
+
 HERE = Path(__file__).parent
 FULL = HERE / "report"  # committed: made by a full run
 QUICK = HERE / "report-quick"  # the quick mode's (CI), not committed
@@ -25,16 +26,10 @@ QUICK = HERE / "report-quick"  # the quick mode's (CI), not committed
 
 def machine() -> str:
     """CPU, cores, Numba threads and JAX's backend, in one line."""
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as f:
-            cpu = next(line.split(":", 1)[1].strip() for line in f if "model name" in line)
-    except (OSError, StopIteration):
-        pass
     import jax
 
     return (
-        f"{cpu}, {os.cpu_count()} cores, Numba threads {numba.get_num_threads()}, "
+        f"{cpu()}, Numba threads {numba.get_num_threads()}, "
         f"JAX {jax.__version__} on {jax.default_backend()}, Python {platform.python_version()}"
     )
 

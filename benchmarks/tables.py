@@ -73,14 +73,19 @@ def table1(
     marked † when still at an edge of the radii tried), of each `untabled` method
     ({(scene, paths): {label: RMSE}}) with its ratio to the best tabled one (below 1: it
     wins), and the reference's noise, whether it is at most a fifth of the least error of
-    the scene's rows, and its initial radius. `rank` marks each row's **best** and _second
-    best_."""
+    the scene's rows, and its initial radius. A method tabled at some budgets but run here
+    at others keeps its one column, the run's RMSE marked ‡ (the table's setting at M, not
+    one tuned at that budget). `rank` marks each row's **best** and _second best_."""
     untabled = untabled or {}
     keep = None if budgets is None else set(budgets)
     labels = list(
         dict.fromkeys(label for r in records for b in r["budgets"] for label in tabled(b))
     )
-    others = list(dict.fromkeys(label for errors in untabled.values() for label in errors))
+    others = [
+        label
+        for label in dict.fromkeys(label for errors in untabled.values() for label in errors)
+        if label not in labels
+    ]
     head = ["scene", "paths", "caustic photons", *labels, *others]
     head += [f"{label} ÷ best classic" for label in others]
     head += ["ref noise", "noise ≤ ⅕ min", "ref r₀ (× diagonal)"]
@@ -93,12 +98,15 @@ def table1(
                 continue
             keys = tabled(b)
             ours = untabled.get((r["scene"], b["paths"]), {})
-            errors = {label: b[keys[label]]["rmse"] if label in keys else None for label in labels}
-            errors |= {label: ours.get(label) for label in others}
+            errors = {
+                label: b[keys[label]]["rmse"] if label in keys else ours.get(label)
+                for label in [*labels, *others]
+            }
             mark = marks(errors) if rank else {}
             cells = [
                 f"{mark.get(label, '')}{fmt(e)}{mark.get(label, '')}"
                 + (edge(b, keys[label]) if label in keys else "")
+                + ("‡" if label in labels and label not in keys and e is not None else "")
                 for label, e in errors.items()
             ]
             best = least_error(b)

@@ -17,12 +17,13 @@ import pytest
 import stability
 import temporal
 from accuracy import growth_flags, pareto, plot_combined, plot_errors, plot_scene, run_ladder
-from cases import Case, load_case, reference_scenes
+from cases import Case, load_case, reference_scenes, tuning
 from checks import ANSWER, REFUSAL, Check, assert_must_hold, summary
 from report import FULL, QUICK, Report
 from tables import table1, timing_table, untabled_columns
 
 from common import M, markdown_table
+from dpm.methods.base import PASSES
 
 
 @dataclass(frozen=True)
@@ -139,14 +140,15 @@ def test_accuracy_against_time(suite: Suite) -> None:
     wrong = [f"{r['scene']} {r['method']} at {r['paths']:,}: {'; '.join(r['problems'])}"
              for r in rows if r["problems"]]  # fmt: skip
     assert not wrong, "\n".join(wrong)
+    tuned, untuned = tuning([suite.case(name) for name in suite.s.scenes])
     lines = [
         f"Caustic RMSE against seconds (trace + gather + estimate; median of {suite.s.rounds} "
         "timed calls after a warm-up call) over emitted-path budgets "
         + ", ".join(f"{b:,}" for b in suite.s.budgets)
-        + f" (M = {M:,}). PPM-best and "
-        "APPM-best keep the parameters the estimator table tuned at M (same initial radius and "
-        "number of passes at every budget); CPPM, not tuned yet, starts from the default "
-        "radius (0.001 × the scene's diagonal) with 10 passes at every budget. SPPM is left "
+        + f" (M = {M:,}). {', '.join(tuned) or 'No method'} keep the parameters the estimator "
+        "table tuned at M (same initial radius and number of passes at every budget); "
+        f"{', '.join(untuned) or 'no method'}, not tuned, start from the default radius "
+        f"(0.001 × the scene's diagonal) with {PASSES} passes at every budget. SPPM is left "
         "out: it averages over each pixel's "
         "footprint while the reference is at one visible point per pixel.",
         "",
@@ -253,6 +255,7 @@ def losses(suite: Suite, rows: list[dict]) -> None:
 def test_paper_tables(suite: Suite) -> None:
     cases = [suite.case(name) for name in suite.s.scenes]
     columns, timing = untabled_columns(cases, suite.s.table_budgets)
+    _, untuned = tuning(cases)
     noise = [
         [case.name, f"{case.record['reference']['paths']:,}",
          f"{case.record['reference']['radius']:.4g}", f"{case.noise:.4f}",
@@ -264,10 +267,12 @@ def test_paper_tables(suite: Suite) -> None:
         [
             "Caustic RMSE (camera-weighted, one visible point per pixel of a 128-wide image). "
             "The classic columns are the estimator table's (`benchmarks/results/estimators.md`: "
-            "PPM and APPM tuned per scene and budget); the methods it does not tune (DPM's "
-            "models; CPPM, untuned, at the default initial radius and 10 passes) are run here "
-            "on the same photon map (seed 0), with their RMSE over the best tabled one (below "
-            "1: they win). The same table at M is "
+            "the progressive methods tuned per scene and budget); the methods it does not tune "
+            f"(DPM's models; {', '.join(untuned) or 'none else'} at the default initial radius "
+            f"and {PASSES} passes) are run here on the same photon map (seed 0), with their "
+            "RMSE over the best tabled one (below 1: they win); ‡: a tabled method that the "
+            "table did not tune at that budget, run here with its setting at M. The same "
+            "table at M is "
             "`benchmarks/results/dpm.md` (`python benchmarks/dpm_table.py`). **Best**, _second "
             "best_.",
             "",
