@@ -147,7 +147,7 @@ def test_accuracy_against_time(suite: Suite) -> None:
         + ", ".join(f"{b:,}" for b in suite.s.budgets)
         + f" (M = {M:,}). {', '.join(tuned) or 'No method'} keep the parameters the estimator "
         "table tuned at M (same initial radius and number of passes at every budget); "
-        f"{', '.join(untuned) or 'no method'}, not tuned, start from the default radius "
+        f"the untuned ({', '.join(untuned) or 'none'}) start from the default radius "
         f"(0.001 × the scene's diagonal) with {PASSES} passes at every budget. SPPM is left "
         "out: it averages over each pixel's "
         "footprint while the reference is at one visible point per pixel.",
