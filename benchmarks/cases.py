@@ -93,11 +93,17 @@ def load_case(name: str) -> Case:
     return Case(name, scene, bvh, table_points(scene, bvh), reference, noise, record)
 
 
+def best_setting(case: Case, name: str) -> dict | None:
+    """The estimator table's best setting at M of progressive method `name` (its record's
+    NAME_best: radius, photons_per_pass, ...), or None where the table did not tune it."""
+    return case.record["budgets"][0].get(f"{name}_best")
+
+
 def tuned(case: Case, name: str, budget: int) -> Estimator | None:
-    """The table's best setting at M of progressive method `name` (its record's NAME_best), its
+    """The table's best setting at M of progressive method `name` (`best_setting`), its
     passes kept at any budget: the same initial radius and number of passes, so the same
     final radius. None when the estimator table did not tune the method."""
-    t = case.record["budgets"][0].get(f"{name}_best")
+    t = best_setting(case, name)
     if t is None:
         return None
     per_pass = max(1, round(t["photons_per_pass"] * budget / M))
@@ -137,7 +143,7 @@ def tuning(cases: list[Case]) -> tuple[list[str], list[str]]:
     """(tuned, untuned) progressive methods of the cases, by report name: NAME-best where the
     estimator table tuned it for every case, else NAME (default radius, PASSES passes)."""
     names = [n for n, cls in photon_methods().items() if not issubclass(cls, NearestPhotons)]
-    done = [n for n in names if all(c.record["budgets"][0].get(f"{n}_best") for c in cases)]
+    done = [n for n in names if all(best_setting(c, n) for c in cases)]
     return [f"{n.upper()}-best" for n in done], [n.upper() for n in names if n not in done]
 
 

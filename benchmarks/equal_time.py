@@ -115,7 +115,7 @@ def run_scene(name: str, width: int, times: list[float]) -> dict:
     scene = load_scene(path)
     height = width * scene.camera.height // scene.camera.width
     camera = scene.camera.with_resolution(width, height)
-    ref = reference(scene, camera, name, OUT / f"{name}-{width}x{height}-reference.exr")
+    ref = reference(scene, camera, name)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
@@ -222,7 +222,7 @@ def main() -> None:
             scene = load_scene(SCENES / f"{name}.obj")
             h = args.width * scene.camera.height // scene.camera.width
             camera = scene.camera.with_resolution(args.width, h)
-            reference(scene, camera, name, OUT / f"{name}-{args.width}x{h}-reference.exr")
+            reference(scene, camera, name)
         return
     records = [run_scene(name, args.width, args.times) for name in names]
     text = report(records)

@@ -1,7 +1,7 @@
 """Equal-time comparison (paper §5): the hybrid, dpm `pt` + OIDN and Mitsuba 3 `path` + OIDN,
 scored against a long reference, on the glass egg and the ring.
 
-    python benchmarks/hybrid.py [SCENE ...] [--width W] [--k K] [--weights FILE]
+    python benchmarks/hybrid.py [SCENE ...] [--width W (128)] [--k K] [--weights FILE]
 
 The hybrid renders first with its defaults (`dpm-render --method hybrid`); its wall time
 (after a warm-up render that compiles everything) is the budget the other two get: each is
@@ -13,8 +13,9 @@ add as many again where they lower the error most (`dpm.methods.adaptive`: the f
 that see a small light through glass or water need hundreds of times more), plus the PPM
 caustic reference (guided emission, two halves) at the visible points of REF_CAUSTIC_SPP
 samples per pixel, averaged per pixel. It is checked against Mitsuba 3 at MITSUBA_CHECK_SPP
-(RMSE and mean ratio in the report). The reference image is cached in
-benchmarks/results/hybrid/SCENE-reference.exr.
+(RMSE and mean ratio in the report). The reference image is cached per scene and size in
+benchmarks/results/equal_time/SCENE-WxH-reference.exr (`benchmarks/equal_time.py` scores
+against the same references), its expected RMSE beside it in a JSON file.
 
 Writes benchmarks/results/hybrid.md and benchmarks/results/hybrid/SCENE.png (the three images
 and the reference side by side). The report also times the README's default render
@@ -25,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import json
 import tempfile
 from pathlib import Path
 
@@ -47,6 +49,7 @@ from dpm.tracer import build_bvh, trace_listed, trace_visible_points
 from dpm.validation.mitsuba import load_mitsuba, mitsuba_scene
 
 OUT = RESULTS / "hybrid"
+REFERENCES = RESULTS / "equal_time"  # converged references, per scene and size (shared)
 REF_SPP = 4096  # pt-nocaustic samples per pixel of the reference
 REF_ROUNDS = 3  # adaptive rounds after it, each of REF_SPP paths per pixel on average
 # Visible points per pixel of the caustic reference: a sharp caustic varies within a pixel,
@@ -103,10 +106,16 @@ def nocaustic_reference(scene: Scene, camera: Camera) -> tuple[np.ndarray, float
     return paths.mean().astype(np.float32).reshape(camera.height, camera.width, 3), paths.noise()
 
 
-def reference(scene: Scene, camera: Camera, name: str, path: Path | None = None) -> np.ndarray:
-    """The long reference image (H, W, 3), cached as an EXR at `path` (default: OUT), with
-    its expected RMSE (path and caustic parts, luminance) in a JSON file beside it."""
-    path = path or OUT / f"{name}-reference.exr"
+def reference_path(name: str, camera: Camera) -> Path:
+    """Where the reference of scene `name` at the camera's size is cached (an EXR)."""
+    return REFERENCES / f"{name}-{camera.width}x{camera.height}-reference.exr"
+
+
+def reference(scene: Scene, camera: Camera, name: str) -> np.ndarray:
+    """The long reference image (H, W, 3), cached as an EXR at `reference_path`, with its
+    expected RMSE (path and caustic parts, luminance) in a JSON file beside it."""
+    path = reference_path(name, camera)
+    path.parent.mkdir(parents=True, exist_ok=True)
     if path.exists():
         return read_exr(path)
     nocaustic, path_noise = nocaustic_reference(scene, camera)
@@ -135,12 +144,19 @@ def mitsuba(scene: Scene, camera: Camera, spp: int, seed: int) -> tuple[np.ndarr
 def equal_time_spp(fn, budget: float) -> int:
     """Samples per pixel that make fn(spp) take about `budget` seconds.
 
-    After a warm-up, the time is fitted as fixed + per-sample cost from two sample counts.
+    After a warm-up, the time is fitted as fixed + per-sample cost from two sample counts;
+    where that fit misses the budget by more than 5 % at its own answer (small counts time
+    poorly), it is refitted once through that run and the lower count.
     """
     fn(1)
     lo, hi = CALIBRATION_SPP, 4 * CALIBRATION_SPP
     t_lo, t_hi = (timed(lambda n=n: fn(n))[1][0] for n in (lo, hi))
     per_spp = max((t_hi - t_lo) / (hi - lo), 1e-9)
+    spp = max(1, int((budget - (t_lo - per_spp * lo)) / per_spp))
+    seconds = timed(lambda: fn(spp))[1][0]
+    if abs(seconds / budget - 1) <= 0.05 or spp <= lo:
+        return spp
+    per_spp = max((seconds - t_lo) / (spp - lo), 1e-9)
     return max(1, int((budget - (t_lo - per_spp * lo)) / per_spp))
 
 
@@ -153,10 +169,7 @@ def run_scene(name: str, width: int, k: int, weights: Path | None) -> dict:
     ref = reference(scene, camera, name)
 
     hybrid = RenderOptions(method="hybrid", k=k, weights=weights, **size)
-    render(
-        scene,
-        RenderOptions(method="hybrid", k=k, weights=weights, width=16, height=16, progress=False),
-    )  # fmt: skip  (warm-up: compile)
+    render(scene, hybrid)  # warm-up at the same size: JAX compiles per block shape
     result, (budget,) = timed(lambda: render(scene, hybrid))
     rows = {"hybrid": (result.image, budget, hybrid.spp)}
 
@@ -175,8 +188,9 @@ def run_scene(name: str, width: int, k: int, weights: Path | None) -> dict:
     rows["Mitsuba 3 path + OIDN"] = (image, seconds, spp)
 
     check = mitsuba(scene, camera, MITSUBA_CHECK_SPP, seed=1)[0]
+    noise = json.loads(reference_path(name, camera).with_suffix(".json").read_text())
     return {
-        "scene": name, "reference": ref, "rows": rows,
+        "scene": name, "reference": ref, "noise": noise, "rows": rows,
         "mitsuba_check": (rmse(check, ref), float(check.mean() / ref.mean())),
     }  # fmt: skip
 
@@ -194,13 +208,13 @@ def default_render_seconds() -> tuple[float, dict]:
     return seconds, result.stats["seconds"]
 
 
-def write_report(records: list[dict], k: int, weights: Path | None) -> None:
+def write_report(records: list[dict], width: int, k: int, weights: Path | None) -> None:
     """Side-by-side PNGs and benchmarks/results/hybrid.md."""
     lines = [
         "# Hybrid vs path tracing + OIDN at equal time",
         "",
-        f"Made by `python benchmarks/hybrid.py` (K = {k}, weights: "
-        f"{weights or 'shipped'}); {cpu()}, "
+        f"Made by `python benchmarks/hybrid.py` (K = {k}, weights: {weights or 'shipped'}, "
+        f"{width} px wide); {cpu()}, "
         f"{datetime.date.today().isoformat()}. Seconds are wall time of the whole render",
         "(photons, gathering, network, path tracing, denoising), compilation excluded.",
         "",
@@ -233,6 +247,9 @@ def write_report(records: list[dict], k: int, weights: Path | None) -> None:
         iio.imwrite(OUT / f"{r['scene']}.png", linear_to_srgb8(row))
         figures += ["", f"![{r['scene']}: " + ", ".join(r["rows"]) + ", reference]"
                     f"(hybrid/{r['scene']}.png)"]  # fmt: skip
+    lines += ["", "Expected RMSE of each reference (luminance; path part, caustic part): "
+              + "; ".join(f"{r['scene']} {r['noise']['path_noise']:.4f}, "
+                          f"{r['noise']['caustic_noise']:.4f}" for r in records) + "."]  # fmt: skip
     lines += figures
     (RESULTS / "hybrid.md").write_text("\n".join(lines) + "\n")
 
@@ -241,13 +258,13 @@ def main() -> None:
     """Run the comparison on the scenes named (default: glass_egg and ring)."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("scenes", nargs="*", default=["glass_egg", "ring"])
-    p.add_argument("--width", type=int, default=256)
+    p.add_argument("--width", type=int, default=128)
     p.add_argument("--k", type=int, default=50)
     p.add_argument("--weights", type=Path, help="default: the shipped model for --k")
     args = p.parse_args()
     OUT.mkdir(parents=True, exist_ok=True)
     records = [run_scene(name, args.width, args.k, args.weights) for name in args.scenes]
-    write_report(records, args.k, args.weights)
+    write_report(records, args.width, args.k, args.weights)
 
 
 if __name__ == "__main__":
