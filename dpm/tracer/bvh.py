@@ -19,7 +19,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-N_BINS = 16
+N_BINS = 32  # SAH bins per axis; with 16, paths in the pools' wavy water took 5–9 % longer
 MAX_LEAF = 8  # a node with more triangles is always split
 TRAVERSAL_COST = 2.0  # SAH cost of one binary node relative to one triangle test
 WIDTH = 8  # children per node
