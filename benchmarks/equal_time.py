@@ -31,7 +31,7 @@ from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
-from hybrid import reference
+from hybrid import reference, reference_noise
 
 from common import RESULTS, SCENES, cpu, markdown_table
 from dpm import load_scene
@@ -147,7 +147,10 @@ def run_scene(name: str, width: int, times: list[float]) -> dict:
     gap = np.ones((height, 4, 3), np.float32)
     strip = np.concatenate([mid[0], gap, mid[1], gap, ref], axis=1)
     iio.imwrite(OUT / f"{name}.png", linear_to_srgb8(strip))
-    return {"scene": name, "size": f"{width}x{height}", "rows": rows, "fixed": fixed}
+    return {
+        "scene": name, "size": f"{width}x{height}", "rows": rows, "fixed": fixed,
+        "noise": reference_noise(name, camera),
+    }  # fmt: skip
 
 
 def report(records: list[dict]) -> str:
@@ -169,8 +172,7 @@ def report(records: list[dict]) -> str:
     plans = [f"- {r['scene']}: {r['rows'][-1]['plan']}" for r in records]
     noise = []
     for r in records:
-        sidecar = OUT / f"{r['scene']}-{r['size']}-reference.json"
-        known = json.loads(sidecar.read_text()) if sidecar.exists() else None
+        known = r["noise"]
         noise.append(
             f"- {r['scene']}: {known['path_noise']:.4f}, {known['caustic_noise']:.4f}"
             if known else f"- {r['scene']}: not recorded"
