@@ -12,12 +12,12 @@ example scene (default the ring; its caustic photons of M emitted paths, seed 0)
   checking their normals inside the jit, features, the network, Eq. 2; it runs while the
   next block of points is gathered), each the best of a few runs after compilation;
 - achieved GFLOP/s (executed FLOPs over the network's seconds) and its fraction of the peak:
-  the best fp32 matmul rate JAX reaches here in the same run (n×n by n×n, XLA's own dots and
-  the YNNPACK dots the network uses).
+  the best fp32 matmul rate JAX reaches here in the same run (n×n by n×n, with XLA's own dots
+  and with its experimental YNNPACK dots, whichever is faster);
 - the same for the network's four 32×32 dense layers alone (bias and ReLU; no gathers,
-  features, pooling or output), as flat matmuls over as many photon rows per step as the
-  network's steps hold: what XLA's dots reach on this architecture's shapes here, the
-  ceiling of the network's own rate.
+  features, pooling or output), feature-major as the network runs them, over as many photon
+  rows per step as the network's steps hold, one call at a time: what XLA's dots reach on
+  this architecture's shapes here.
 Prints `fraction of peak: X` (the worst of the four) and writes
 benchmarks/results/inference.md; `--quick` (CI) runs 4,096 points once and writes nothing.
 """
@@ -37,7 +37,6 @@ from dpm import load_scene
 from dpm.density.gather import PhotonIndex
 from dpm.nn.infer import (
     ACTIVATIONS_PER_CHUNK,
-    fast_dots,
     make_query_predict,
     predict_points,
 )
@@ -46,6 +45,8 @@ from dpm.tracer import build_bvh, trace_photons, trace_visible_points
 
 KS = (50, 500)
 POINTS = (65_536, 262_144)
+# XLA's experimental YNNPACK dots: the peak is the better of these and XLA's own
+YNN_DOTS = {"xla_cpu_experimental_ynn_fusion_type": "LIBRARY_FUSION_TYPE_DOT"}
 
 
 def dense_layers(params: dict) -> list[tuple[str, int, int]]:
@@ -67,13 +68,17 @@ def flops_per_point(params: dict, k: int) -> tuple[int, int]:
 
 
 def peak_gflops(sizes: tuple[int, ...], rounds: int) -> float:
-    """The best fp32 n×n matmul GFLOP/s of JAX here, with XLA's dots and with YNNPACK's."""
+    """The best fp32 n×n matmul GFLOP/s of JAX here, with XLA's dots and with YNNPACK's
+    (where this jaxlib knows the experimental option)."""
     best = 0.0
-    for options in ({}, fast_dots()):
+    for options in ({}, YNN_DOTS):
         for n in sizes:
             a = jnp.asarray(np.random.default_rng(0).random((n, n)), jnp.float32)
             mm = jax.jit(lambda a: a @ a, compiler_options=options)
-            seconds = best_of(lambda mm=mm, a=a: jax.block_until_ready(mm(a)), rounds)
+            try:
+                seconds = best_of(lambda mm=mm, a=a: jax.block_until_ready(mm(a)), rounds)
+            except Exception:  # an unknown option or value: XLA's own dots only
+                continue
             best = max(best, 2 * n**3 / seconds / 1e9)
     return best
 
@@ -81,7 +86,7 @@ def peak_gflops(sizes: tuple[int, ...], rounds: int) -> float:
 def layers_alone(params: dict, rows: int, rounds: int) -> float:
     """GFLOP/s of the 32×32 dense layers of KernelNet's params (extractor Dense_1, Dense_2;
     predictor Dense_0's photon half, Dense_1), each with bias and ReLU, chained over `rows`
-    photon rows in steps of ACTIVATIONS_PER_CHUNK rows, as the network runs them."""
+    photon rows, feature-major, in steps of ACTIVATIONS_PER_CHUNK rows."""
     p = params["params"]
     extractor, first = p["Extractor_0"], p["Dense_0"]
     width = extractor["Dense_1"]["kernel"].shape[0]
@@ -89,17 +94,17 @@ def layers_alone(params: dict, rows: int, rounds: int) -> float:
     layers = [extractor["Dense_1"], extractor["Dense_2"], own, p["Dense_1"]]
     layers = [jax.tree.map(jnp.asarray, layer) for layer in layers]
     steps = max(1, rows // ACTIVATIONS_PER_CHUNK)
-    x = np.random.default_rng(0).random((steps, ACTIVATIONS_PER_CHUNK, width), np.float32)
+    x = np.random.default_rng(0).random((steps, width, ACTIVATIONS_PER_CHUNK), np.float32)
     x = jnp.asarray(x)
 
     def chain(h: jnp.ndarray) -> jnp.ndarray:
         for layer in layers:
-            h = jax.nn.relu(h @ layer["kernel"] + layer["bias"])
+            h = jax.nn.relu(layer["kernel"].T @ h + layer["bias"][:, None])
         return h
 
-    run = jax.jit(lambda x: jax.lax.map(chain, x), compiler_options=fast_dots())
+    run = jax.jit(lambda x: jax.lax.map(chain, x))
     seconds = best_of(lambda: jax.block_until_ready(run(x)), rounds)
-    return 2 * width * width * len(layers) * x.shape[0] * x.shape[1] / seconds / 1e9
+    return 2 * width * width * len(layers) * x.shape[0] * x.shape[2] / seconds / 1e9
 
 
 def best_of(fn, rounds: int) -> float:
@@ -174,7 +179,8 @@ def report(rows: list[dict], peak: float, alone: float, name: str) -> list[str]:
         *markdown_table(head, body),
         "",
         f"The network's four 32×32 dense layers alone (bias, ReLU; no gathers, features or "
-        f"pooling), {ACTIVATIONS_PER_CHUNK:,} photon rows a step: {alone:.1f} GFLOP/s, "
+        f"pooling), feature-major, {ACTIVATIONS_PER_CHUNK:,} photon rows a step, one call at a "
+        f"time: {alone:.1f} GFLOP/s, "
         f"{alone / peak:.2f} of peak.",
         "",
         f"Machine: {cpu()}; JAX {jax.__version__}; {datetime.date.today().isoformat()}",

@@ -55,8 +55,13 @@ def canonical_angle(offset: jnp.ndarray, valid: jnp.ndarray, normal: jnp.ndarray
     """Frame angle that turns the first tangent towards the mean offset (K, 3) of the valid
     photons, projected on the tangent plane: inference then does not depend on how the
     tangents happened to be chosen (training turns them at random instead)."""
+    return centre_angle(jnp.sum(jnp.where(valid[:, None], offset, 0.0), axis=0), normal)
+
+
+def centre_angle(centre: jnp.ndarray, normal: jnp.ndarray) -> jnp.ndarray:
+    """Frame angle (radians) that turns the first tangent towards `centre` (3,), a sum of
+    offsets, projected on the tangent plane of the unit normal (3,)."""
     frame = local_frame(normal, jnp.zeros(()))
-    centre = jnp.sum(jnp.where(valid[:, None], offset, 0.0), axis=0)
     return jnp.arctan2(centre @ frame[1], centre @ frame[0])
 
 

@@ -5,17 +5,18 @@
 (params, Batch) -> (B, 3) radiance. Rendering uses `make_query_predict`, which takes the
 photon map's arrays once and each chunk of points as indices of their neighbours (`Query`),
 so gathering the (B, K, 3) photon arrays happens inside the jitted function;
-`predict_points` runs it over a whole set of points in chunks sized to stay in the caches.
-The KernelNet is evaluated as flat matmuls over all the chunk's photons (`kernel_radiance`),
-with XLA's YNNPACK matmuls; rendering also folds the input features into the first layer and
-reads each photon as one packed row (`query_radiance`). Both equal the per-point Flax `apply`
-within float rounding (tested).
+`predict_points` runs it over a whole set of points in chunks sized to stay in the caches,
+two blocks of points at a time. The KernelNet is evaluated as flat matmuls over all the
+chunk's photons, feature-major: activations (width, B·K), so each layer is a (width × width)
+by (width × B·K) product, which XLA's dots run faster than the transposed thin (B·K × width)
+one (`kernel_head`). Both equal the per-point Flax `apply` within float rounding (tested).
 """
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Callable, Iterator
-from functools import cache
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import NamedTuple
 
 import flax.linen as nn
@@ -27,6 +28,7 @@ from dpm.density.gather import NORMAL_COS, PhotonIndex, photon_index, take
 from dpm.nn.features import (
     MIN_RADIUS,
     canonical_angle,
+    centre_angle,
     features,
     flux_map,
     kernel_estimate,
@@ -37,18 +39,7 @@ from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap
 
 ACTIVATIONS_PER_CHUNK = 1 << 14  # points per chunk × K: activations stay in the caches
-# XLA's YNNPACK matmuls: 1.5–2× XLA's default on the network's thin (rows × 32) layers
-YNN_DOTS = {"xla_cpu_experimental_ynn_fusion_type": "LIBRARY_FUSION_TYPE_DOT"}
-
-
-@cache
-def fast_dots() -> dict:
-    """YNN_DOTS where this jaxlib knows the option (it is experimental), else no options."""
-    try:
-        jax.jit(lambda a: a @ a, compiler_options=YNN_DOTS)(jnp.ones((2, 2)))
-    except Exception:  # an unknown option or value: XLA's own dots
-        return {}
-    return YNN_DOTS
+BLOCKS_IN_FLIGHT = 2  # blocks the network runs at once: one's serial parts overlap the other's
 
 
 class Batch(NamedTuple):
@@ -79,52 +70,55 @@ def point_radiance(model: nn.Module, params: dict, b: Batch) -> jnp.ndarray:
 
 
 def _dense(layer: dict, x: jnp.ndarray) -> jnp.ndarray:
-    """(R, out) x @ kernel + bias of one Flax Dense layer's params on rows (R, in)."""
-    return x @ layer["kernel"] + layer["bias"]
+    """(out, R) kernelᵀ x + bias of one Flax Dense layer's params on feature-major rows
+    x (in, R)."""
+    return layer["kernel"].T @ x + layer["bias"][:, None]
 
 
 def kernel_radiance(params: dict, b: Batch) -> jnp.ndarray:
     """(B, 3) radiance of B points by KernelNet's params: `point_radiance` rewritten as flat
     matmuls over the B·K photon rows, for speed (equal within float rounding, tested)."""
-    p = params["params"]
-    n, k = b.valid.shape
     canonical = jax.vmap(canonical_angle)(b.offset, b.valid, b.normal)
     angle = jnp.where(jnp.isnan(b.angle), canonical, b.angle)
     x = jax.vmap(features)(b.offset, b.direction, b.flux, b.normal, b.radius, b.n_paths, angle)
-    h = jax.nn.relu(_dense(p["Extractor_0"]["Dense_0"], x.reshape(n * k, x.shape[-1])))
-    return kernel_head(p, h, b.valid, b.flux, b.albedo, b.radius)
+    x = jnp.moveaxis(x, 2, 0)  # (9, B, K)
+    return kernel_head(params["params"], x, b.valid, b.flux, b.albedo, b.radius)
 
 
 def kernel_head(
     p: dict,
-    h: jnp.ndarray,
+    x: jnp.ndarray,
     valid: jnp.ndarray,
     flux: jnp.ndarray,
     albedo: jnp.ndarray,
     radius: jnp.ndarray,
 ) -> jnp.ndarray:
-    """(B, 3) radiance from the extractor's first-layer activations h (B·K, width) of B
-    points' K photons (valid (B, K), stored flux (B, K, 3), albedo (B, 3), bandwidth (B,)):
-    the rest of KernelNet as flat matmuls, then Eq. 2.
+    """(B, 3) radiance of B points from the network inputs x (9, B, K) of their K photons
+    (valid (B, K), stored flux (B, K, 3), albedo (B, 3), bandwidth (B,)): KernelNet as flat
+    matmuls, then Eq. 2.
 
-    The predictor's first layer takes [photon feature, context]; its context half is applied
-    once per point, not once per photon, which saves a third of the network's arithmetic.
+    Activations are feature-major, (width, B·K): each layer is one (width × width) by
+    (width × B·K) product, which XLA's dots run faster than the thin (B·K × width) by
+    (width × width) one. The predictor's first layer takes [photon feature, context]; its
+    context half is applied once per point, not once per photon, which saves a third of the
+    network's arithmetic.
     """
-    n, k = valid.shape
-    for name in ("Dense_1", "Dense_2"):
-        h = jax.nn.relu(_dense(p["Extractor_0"][name], h))
-    width = h.shape[-1]
-    h3 = h.reshape(n, k, width)
+    channels, n, k = x.shape
+    extractor = p["Extractor_0"]
+    h = x.reshape(channels, n * k)
+    for name in ("Dense_0", "Dense_1", "Dense_2"):
+        h = jax.nn.relu(_dense(extractor[name], h))
+    width = h.shape[0]
     # ReLU features are ≥ 0, so zeroing the invalid photons leaves the max over the valid
     # ones (and 0 when none is valid, as the Extractor does), with one masked array
-    masked = h3 * valid[:, :, None]
-    biggest = jnp.max(masked, axis=1)
-    mean = jnp.sum(masked, axis=1) / jnp.maximum(valid.sum(1), 1)[:, None]
+    masked = h.reshape(width, n, k) * valid
+    biggest = jnp.max(masked, axis=2)
+    mean = jnp.sum(masked, axis=2) / jnp.maximum(valid.sum(1), 1)
     first = p["Dense_0"]
     own, shared = first["kernel"][:width], first["kernel"][width:]
-    context = jnp.concatenate([biggest, mean], axis=-1) @ shared + first["bias"]  # (B, width)
-    z = jax.nn.relu((h @ own).reshape(n, k, width) + context[:, None, :])
-    z = jax.nn.relu(_dense(p["Dense_1"], z.reshape(n * k, width)))
+    context = _dense({"kernel": shared, "bias": first["bias"]}, jnp.concatenate([biggest, mean]))
+    z = jax.nn.relu((own.T @ h).reshape(width, n, k) + context[:, :, None])
+    z = jax.nn.relu(_dense(p["Dense_1"], z.reshape(width, n * k)))
     z = _dense(p["Dense_2"], z).reshape(n, k)
     weight = jnp.where(valid, jax.nn.softplus(z + SHIFT), 0.0)
     return jax.vmap(kernel_estimate)(weight, flux, valid, albedo, radius)
@@ -139,7 +133,7 @@ def batch_radiance(model: nn.Module) -> Callable[[dict, Batch], jnp.ndarray]:
 
 def make_predict(model: nn.Module) -> Callable[[dict, Batch], jnp.ndarray]:
     """A jitted pure function (params, Batch of B points) -> (B, 3) float32 radiance."""
-    return jax.jit(batch_radiance(model), compiler_options=fast_dots())
+    return jax.jit(batch_radiance(model))
 
 
 class PhotonTable(NamedTuple):
@@ -206,30 +200,24 @@ def read_photons(table: PhotonTable, q: Query) -> tuple[jnp.ndarray, ...]:
 
 def query_radiance(params: dict, table: PhotonTable, q: Query) -> jnp.ndarray:
     """(B, 3) radiance of q's B points by KernelNet's params: `kernel_radiance` of their
-    `gathered_batch` with the input features folded into the first layer (equal within
-    float rounding, tested), for speed.
-
-    The first layer is linear in the features: a point's frame rotation and 1/r act on its
-    photons' offsets and directions through per-point (6, width) weights, so no (B, K, 9)
-    feature array is formed; the flux feature comes precomputed with the photon's row.
-    """
-    p = params["params"]
-    n, k = q.index.shape
+    `gathered_batch`, with the features formed as (9, B, K) straight from the photons' rows
+    (the flux feature comes precomputed with the row); equal within float rounding (tested)."""
     photon, offset, valid = read_photons(table, q)
-    canonical = jax.vmap(canonical_angle)(offset, valid, q.normal)
-    angle = jnp.where(jnp.isnan(q.angle), canonical, q.angle)
-    frame = jax.vmap(local_frame)(q.normal, angle)  # (B, 3, 3): tangent rows, then normal
-    first = p["Extractor_0"]["Dense_0"]
-    kernel = first["kernel"]  # rows: position (3), direction (3), flux feature (3)
+    column = jnp.moveaxis(photon, 2, 0)  # (16, B, K): one channel a row
+    offset = jnp.moveaxis(offset, 2, 0)
+    centre = jnp.sum(jnp.where(valid, offset, 0.0), axis=2).T  # (B, 3)
+    angle = jnp.where(jnp.isnan(q.angle), jax.vmap(centre_angle)(centre, q.normal), q.angle)
+    frame = jnp.transpose(jax.vmap(local_frame)(q.normal, angle), (1, 2, 0))  # (row, xyz, B)
+
+    def in_frame(v: jnp.ndarray) -> jnp.ndarray:
+        """(3, B, K) vectors v (3, B, K) in each point's frame: products and sums, fused."""
+        return jnp.stack([sum(frame[r, c][:, None] * v[c] for c in range(3)) for r in range(3)])
+
     inv_r = 1.0 / jnp.maximum(q.radius, MIN_RADIUS)
-    to_position = jnp.einsum("bij,iw->bjw", frame, kernel[0:3]) * inv_r[:, None, None]
-    to_direction = jnp.einsum("bij,iw->bjw", frame, kernel[3:6])
-    per_point = jnp.concatenate([to_position, to_direction], axis=1)  # (B, 6, width)
-    x = jnp.concatenate([offset, photon[..., DIRECTION]], axis=-1)  # (B, K, 6)
-    flux = photon[..., FLUX_FEATURE].reshape(n * k, 3) @ kernel[6:9] + first["bias"]
-    h = jnp.einsum("bkc,bcw->bkw", x, per_point) + flux.reshape(n, k, -1)
-    h = jax.nn.relu(h).reshape(n * k, -1)
-    return kernel_head(p, h, valid, photon[..., FLUX], q.albedo, q.radius)
+    x = jnp.concatenate(
+        [in_frame(offset) * inv_r[:, None], in_frame(column[DIRECTION]), column[FLUX_FEATURE]]
+    )
+    return kernel_head(params["params"], x, valid, photon[..., FLUX], q.albedo, q.radius)
 
 
 def make_query_predict(
@@ -249,7 +237,7 @@ def make_query_predict(
     def steps(params: dict, table: PhotonTable, q: Query) -> jnp.ndarray:
         return jax.lax.map(lambda part: radiance(params, table, part), q)
 
-    return jax.jit(steps, compiler_options=fast_dots())
+    return jax.jit(steps)
 
 
 def neighbourhoods(
@@ -304,6 +292,11 @@ def as_steps(q: Query, size: int) -> Query:
     return Query(*(split(a) for a in q))
 
 
+def q_part(q: Query, part: slice) -> Query:
+    """The points `part` of q."""
+    return Query(*(a[part] for a in q))
+
+
 def predict_points(
     predict: Callable[[dict, PhotonTable, Query], jnp.ndarray],
     params: dict,
@@ -316,26 +309,38 @@ def predict_points(
 ) -> np.ndarray:
     """(N, 3) float32 radiance at points (N, 3) from their k nearest photons, chunk by chunk,
     with `predict` from `make_query_predict`; gathering counts as the watch's "gather" (the
-    caller times the rest). Each block's network runs while the next block is gathered, so
-    the "gather" stage also holds the network's time that the gather could not hide."""
+    caller times the rest). Each gathered block is split in BLOCKS_IN_FLIGHT parts that the
+    network runs at once, on worker threads, while the next block is gathered, so the "gather"
+    stage also holds the network's time that the gather could not hide. Each point's result
+    depends on its own photons alone: the same output whatever the threads."""
     index = photon_index(photons, watch)
     p = index.photons
     table = photon_table(p)
     out = np.zeros((len(position), 3), np.float32)
     size = chunk_size(k)
-    pending = []
-    for rows, nb in index.nearest(position, normal, k, watch, agree=False):
-        here = np.asarray(position[rows], np.float64)
-        hi = here.astype(np.float32)
-        radius = np.where(np.isfinite(nb.distance[:, -1]), nb.distance[:, -1], 0.0)
-        q = Query(
-            nb.index.astype(np.int32), hi, (here - hi).astype(np.float32),
-            np.asarray(normal[rows], np.float32), np.asarray(albedo[rows], np.float32),
-            radius.astype(np.float32), np.full(len(here), np.nan, np.float32),
-            np.full(len(here), p.n_paths, np.float32),
-        )  # fmt: skip
-        result = predict(params, table, as_steps(q, size))  # runs while the next block gathers
-        pending.append((rows, result))
-    for rows, result in pending:
-        out[rows] = np.asarray(result).reshape(-1, 3)[: rows.stop - rows.start]
+
+    def run(rows: slice, q: Query) -> None:
+        out[rows] = np.asarray(predict(params, table, q)).reshape(-1, 3)[: rows.stop - rows.start]
+
+    with ThreadPoolExecutor(BLOCKS_IN_FLIGHT) as pool:
+        running: deque[Future] = deque()
+        for rows, nb in index.nearest(position, normal, k, watch, agree=False):
+            here = np.asarray(position[rows], np.float64)
+            hi = here.astype(np.float32)
+            radius = np.where(np.isfinite(nb.distance[:, -1]), nb.distance[:, -1], 0.0)
+            q = Query(
+                nb.index.astype(np.int32), hi, (here - hi).astype(np.float32),
+                np.asarray(normal[rows], np.float32), np.asarray(albedo[rows], np.float32),
+                radius.astype(np.float32), np.full(len(here), np.nan, np.float32),
+                np.full(len(here), p.n_paths, np.float32),
+            )  # fmt: skip
+            share = -(-len(here) // BLOCKS_IN_FLIGHT)  # every worker starts on the first block
+            for first in range(0, len(here), share):
+                part = slice(first, min(first + share, len(here)))
+                points = slice(rows.start + part.start, rows.start + part.stop)
+                running.append(pool.submit(run, points, as_steps(q_part(q, part), size)))
+            while len(running) > 2 * BLOCKS_IN_FLIGHT:  # hold few gathered blocks in memory
+                running.popleft().result()
+        for job in running:
+            job.result()
     return out
