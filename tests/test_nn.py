@@ -181,7 +181,7 @@ def test_jit_vmap_inference_equals_a_plain_per_point_implementation(monkeypatch)
 
 @pytest.mark.parametrize("n_photons", [3000, K])
 def test_fast_inference_equals_the_flax_module_point_by_point(n_photons: int) -> None:
-    """`make_query_predict` (photons gathered inside the jit, flat matmuls, YNNPACK dots)
+    """`make_query_predict` (photons gathered inside the jit, feature-major flat matmuls)
     equals the Flax module applied point by point to numpy-gathered Batches, far from the
     origin (the offsets keep their float64 accuracy), and with exactly K photons."""
     shift = np.float32([1000.0, 0.0, -2000.0])
