@@ -6,7 +6,7 @@
 photon map's arrays once and each chunk of points as indices of their neighbours (`Query`),
 so gathering the (B, K, 3) photon arrays happens inside the jitted function;
 `predict_points` runs it over a whole set of points in chunks sized to stay in the caches,
-two blocks of points at a time. The KernelNet is evaluated as flat matmuls over all the
+each gathered block in two halves at once. The KernelNet is evaluated as flat matmuls over all the
 chunk's photons, feature-major: activations (width, B·K), so each layer is a (width × width)
 by (width × B·K) product, which XLA's dots run faster than the transposed thin (B·K × width)
 one (`kernel_head`). Both equal the per-point Flax `apply` within float rounding (tested).
@@ -39,7 +39,7 @@ from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap
 
 ACTIVATIONS_PER_CHUNK = 1 << 14  # points per chunk × K: activations stay in the caches
-BLOCKS_IN_FLIGHT = 2  # blocks the network runs at once: one's serial parts overlap the other's
+BLOCKS_IN_FLIGHT = 2  # parts of a block run at once: one's serial parts overlap the other's
 
 
 class Batch(NamedTuple):
@@ -311,8 +311,8 @@ def predict_points(
     with `predict` from `make_query_predict`; gathering counts as the watch's "gather" (the
     caller times the rest). Each gathered block is split in BLOCKS_IN_FLIGHT parts that the
     network runs at once, on worker threads, while the next block is gathered, so the "gather"
-    stage also holds the network's time that the gather could not hide. Each point's result
-    depends on its own photons alone: the same output whatever the threads."""
+    stage also holds the network's time that the gather could not hide. The split is fixed,
+    not taken from the machine's thread count, so the output is the same on any machine."""
     index = photon_index(photons, watch)
     p = index.photons
     table = photon_table(p)
@@ -324,23 +324,27 @@ def predict_points(
 
     with ThreadPoolExecutor(BLOCKS_IN_FLIGHT) as pool:
         running: deque[Future] = deque()
-        for rows, nb in index.nearest(position, normal, k, watch, agree=False):
-            here = np.asarray(position[rows], np.float64)
-            hi = here.astype(np.float32)
-            radius = np.where(np.isfinite(nb.distance[:, -1]), nb.distance[:, -1], 0.0)
-            q = Query(
-                nb.index.astype(np.int32), hi, (here - hi).astype(np.float32),
-                np.asarray(normal[rows], np.float32), np.asarray(albedo[rows], np.float32),
-                radius.astype(np.float32), np.full(len(here), np.nan, np.float32),
-                np.full(len(here), p.n_paths, np.float32),
-            )  # fmt: skip
-            share = -(-len(here) // BLOCKS_IN_FLIGHT)  # every worker starts on the first block
-            for first in range(0, len(here), share):
-                part = slice(first, min(first + share, len(here)))
-                points = slice(rows.start + part.start, rows.start + part.stop)
-                running.append(pool.submit(run, points, as_steps(q_part(q, part), size)))
-            while len(running) > 2 * BLOCKS_IN_FLIGHT:  # hold few gathered blocks in memory
-                running.popleft().result()
-        for job in running:
-            job.result()
+        try:
+            for rows, nb in index.nearest(position, normal, k, watch, agree=False):
+                here = np.asarray(position[rows], np.float64)
+                hi = here.astype(np.float32)
+                radius = np.where(np.isfinite(nb.distance[:, -1]), nb.distance[:, -1], 0.0)
+                q = Query(
+                    nb.index.astype(np.int32), hi, (here - hi).astype(np.float32),
+                    np.asarray(normal[rows], np.float32), np.asarray(albedo[rows], np.float32),
+                    radius.astype(np.float32), np.full(len(here), np.nan, np.float32),
+                    np.full(len(here), p.n_paths, np.float32),
+                )  # fmt: skip
+                share = -(-len(here) // BLOCKS_IN_FLIGHT)  # every worker starts on the first block
+                for first in range(0, len(here), share):
+                    part = slice(first, min(first + share, len(here)))
+                    points = slice(rows.start + part.start, rows.start + part.stop)
+                    running.append(pool.submit(run, points, as_steps(q_part(q, part), size)))
+                while len(running) > 2 * BLOCKS_IN_FLIGHT:  # hold few gathered blocks in memory
+                    running.popleft().result()
+            for job in running:
+                job.result()
+        except BaseException:  # an interrupt or error: drop the queued parts
+            pool.shutdown(cancel_futures=True)
+            raise
     return out
