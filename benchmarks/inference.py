@@ -16,8 +16,8 @@ example scene (default the ring; its caustic photons of M emitted paths, seed 0)
   and with its experimental YNNPACK dots, whichever is faster);
 - the same for the network's four 32×32 dense layers alone (bias and ReLU; no gathers,
   features, pooling or output), feature-major as the network runs them, over as many photon
-  rows per step as the network's steps hold, one call at a time: what XLA's dots reach on
-  this architecture's shapes here.
+  rows per step as the network's steps hold, BLOCKS_IN_FLIGHT calls at once as
+  `predict_points` runs them: what XLA's dots reach on this architecture's shapes here.
 Prints `fraction of peak: X` (the worst of the four) and writes
 benchmarks/results/inference.md; `--quick` (CI) runs 4,096 points once and writes nothing.
 """
@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import datetime
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import jax
 import jax.numpy as jnp
@@ -37,6 +38,7 @@ from dpm import load_scene
 from dpm.density.gather import PhotonIndex
 from dpm.nn.infer import (
     ACTIVATIONS_PER_CHUNK,
+    BLOCKS_IN_FLIGHT,
     make_query_predict,
     predict_points,
 )
@@ -86,16 +88,17 @@ def peak_gflops(sizes: tuple[int, ...], rounds: int) -> float:
 def layers_alone(params: dict, rows: int, rounds: int) -> float:
     """GFLOP/s of the 32×32 dense layers of KernelNet's params (extractor Dense_1, Dense_2;
     predictor Dense_0's photon half, Dense_1), each with bias and ReLU, chained over `rows`
-    photon rows, feature-major, in steps of ACTIVATIONS_PER_CHUNK rows."""
+    photon rows, feature-major, in steps of ACTIVATIONS_PER_CHUNK rows, BLOCKS_IN_FLIGHT
+    calls at once on worker threads (as `predict_points` runs the network)."""
     p = params["params"]
     extractor, first = p["Extractor_0"], p["Dense_0"]
     width = extractor["Dense_1"]["kernel"].shape[0]
     own = {"kernel": first["kernel"][:width], "bias": first["bias"]}
     layers = [extractor["Dense_1"], extractor["Dense_2"], own, p["Dense_1"]]
     layers = [jax.tree.map(jnp.asarray, layer) for layer in layers]
-    steps = max(1, rows // ACTIVATIONS_PER_CHUNK)
-    x = np.random.default_rng(0).random((steps, width, ACTIVATIONS_PER_CHUNK), np.float32)
-    x = jnp.asarray(x)
+    steps = max(1, rows // ACTIVATIONS_PER_CHUNK // BLOCKS_IN_FLIGHT)
+    shape = (BLOCKS_IN_FLIGHT, steps, width, ACTIVATIONS_PER_CHUNK)
+    x = jnp.asarray(np.random.default_rng(0).random(shape, np.float32))
 
     def chain(h: jnp.ndarray) -> jnp.ndarray:
         for layer in layers:
@@ -103,8 +106,11 @@ def layers_alone(params: dict, rows: int, rounds: int) -> float:
         return h
 
     run = jax.jit(lambda x: jax.lax.map(chain, x))
-    seconds = best_of(lambda: jax.block_until_ready(run(x)), rounds)
-    return 2 * width * width * len(layers) * x.shape[0] * x.shape[2] / seconds / 1e9
+    with ThreadPoolExecutor(BLOCKS_IN_FLIGHT) as pool:
+        seconds = best_of(
+            lambda: list(pool.map(lambda part: jax.block_until_ready(run(part)), x)), rounds
+        )
+    return 2 * width * len(layers) * x.size / seconds / 1e9  # x.size / width photon rows
 
 
 def best_of(fn, rounds: int) -> float:
@@ -179,8 +185,8 @@ def report(rows: list[dict], peak: float, alone: float, name: str) -> list[str]:
         *markdown_table(head, body),
         "",
         f"The network's four 32×32 dense layers alone (bias, ReLU; no gathers, features or "
-        f"pooling), feature-major, {ACTIVATIONS_PER_CHUNK:,} photon rows a step, one call at a "
-        f"time: {alone:.1f} GFLOP/s, "
+        f"pooling), feature-major, {ACTIVATIONS_PER_CHUNK:,} photon rows a step, "
+        f"{BLOCKS_IN_FLIGHT} calls at once: {alone:.1f} GFLOP/s, "
         f"{alone / peak:.2f} of peak.",
         "",
         f"Machine: {cpu()}; JAX {jax.__version__}; {datetime.date.today().isoformat()}",

@@ -38,7 +38,7 @@ from dpm.nn.model import SHIFT, KernelNet
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap
 
-ACTIVATIONS_PER_CHUNK = 1 << 14  # points per chunk × K: activations stay in the caches
+ACTIVATIONS_PER_CHUNK = 1 << 11  # points per chunk × K: activations (32 × this) stay in L2
 BLOCKS_IN_FLIGHT = 2  # parts of a block run at once: one's serial parts overlap the other's
 
 
