@@ -15,9 +15,10 @@ example scene (default the ring; its caustic photons of M emitted paths, seed 0)
   the best fp32 matmul rate JAX reaches here in the same run (n×n by n×n, with XLA's own dots
   and with its experimental YNNPACK dots, whichever is faster);
 - the same for the network's four 32×32 dense layers alone (bias and ReLU; no gathers,
-  features, pooling or output), feature-major as the network runs them, over as many photon
-  rows per step as the network's steps hold, BLOCKS_IN_FLIGHT calls at once as
-  `predict_points` runs them: what XLA's dots reach on this architecture's shapes here.
+  features, pooling or output), feature-major as the network runs them, BLOCKS_IN_FLIGHT
+  calls at once as `predict_points` runs them, in steps of LAYER_ROWS photon rows (the
+  layers' best step here; the network's own steps are smaller, as its other work is
+  fastest when a step stays in L2): what XLA's dots reach on this architecture's shapes.
 Prints `fraction of peak: X` (the worst of the four) and writes
 benchmarks/results/inference.md; `--quick` (CI) runs 4,096 points once and writes nothing.
 """
@@ -46,6 +47,7 @@ from dpm.nn.weights import load_weights, shipped_weights
 from dpm.tracer import build_bvh, trace_photons, trace_visible_points
 
 KS = (50, 500)
+LAYER_ROWS = 1 << 14  # photon rows a step of the layers alone (2,048: 0.28-0.30 of peak)
 POINTS = (65_536, 262_144)
 # XLA's experimental YNNPACK dots: the peak is the better of these and XLA's own
 YNN_DOTS = {"xla_cpu_experimental_ynn_fusion_type": "LIBRARY_FUSION_TYPE_DOT"}
@@ -88,7 +90,7 @@ def peak_gflops(sizes: tuple[int, ...], rounds: int) -> float:
 def layers_alone(params: dict, rows: int, rounds: int) -> float:
     """GFLOP/s of the 32×32 dense layers of KernelNet's params (extractor Dense_1, Dense_2;
     predictor Dense_0's photon half, Dense_1), each with bias and ReLU, chained over `rows`
-    photon rows, feature-major, in steps of ACTIVATIONS_PER_CHUNK rows, BLOCKS_IN_FLIGHT
+    photon rows, feature-major, in steps of LAYER_ROWS rows, BLOCKS_IN_FLIGHT
     calls at once on worker threads (as `predict_points` runs the network)."""
     p = params["params"]
     extractor, first = p["Extractor_0"], p["Dense_0"]
@@ -96,8 +98,8 @@ def layers_alone(params: dict, rows: int, rounds: int) -> float:
     own = {"kernel": first["kernel"][:width], "bias": first["bias"]}
     layers = [extractor["Dense_1"], extractor["Dense_2"], own, p["Dense_1"]]
     layers = [jax.tree.map(jnp.asarray, layer) for layer in layers]
-    steps = max(1, rows // ACTIVATIONS_PER_CHUNK // BLOCKS_IN_FLIGHT)
-    shape = (BLOCKS_IN_FLIGHT, steps, width, ACTIVATIONS_PER_CHUNK)
+    steps = max(1, rows // LAYER_ROWS // BLOCKS_IN_FLIGHT)
+    shape = (BLOCKS_IN_FLIGHT, steps, width, LAYER_ROWS)
     x = jnp.asarray(np.random.default_rng(0).random(shape, np.float32))
 
     def chain(h: jnp.ndarray) -> jnp.ndarray:
@@ -185,7 +187,8 @@ def report(rows: list[dict], peak: float, alone: float, name: str) -> list[str]:
         *markdown_table(head, body),
         "",
         f"The network's four 32×32 dense layers alone (bias, ReLU; no gathers, features or "
-        f"pooling), feature-major, {ACTIVATIONS_PER_CHUNK:,} photon rows a step, "
+        f"pooling), feature-major, {LAYER_ROWS:,} photon rows a step (the network's hold at most "
+        f"{ACTIVATIONS_PER_CHUNK:,}), "
         f"{BLOCKS_IN_FLIGHT} calls at once: {alone:.1f} GFLOP/s, "
         f"{alone / peak:.2f} of peak.",
         "",
