@@ -108,6 +108,21 @@ def timed(fn: Callable[[], Any], rounds: int = 1) -> tuple[Any, list[float]]:
     return result, seconds
 
 
+def linear_fit(lo: tuple[int, float], hi: tuple[int, float]) -> tuple[float, float]:
+    """(fixed seconds, seconds per sample per pixel) of the line through two timed renders
+    (spp, seconds)."""
+    per_spp = max((hi[1] - lo[1]) / (hi[0] - lo[0]), 1e-6)
+    return lo[1] - per_spp * lo[0], per_spp
+
+
+def secant_spp(spp: int, seconds: float, fixed: float, budget: float) -> int:
+    """Samples per pixel that should take `budget` seconds, after spp took `seconds`: the
+    line through that render and the fit's fixed seconds, kept within 4× of spp (a noisy
+    fixed cost near `seconds` once asked for 79,119 spp)."""
+    rate = max(seconds - fixed, 1e-3) / spp
+    return min(max(round((budget - fixed) / rate), spp // 4, 1), 4 * spp)
+
+
 def timed_estimate(
     estimator: Any,
     points: VisiblePoints,

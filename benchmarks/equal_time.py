@@ -33,7 +33,7 @@ import imageio.v3 as iio
 import numpy as np
 from hybrid import reference, reference_noise
 
-from common import RESULTS, SCENES, cpu, markdown_table
+from common import RESULTS, SCENES, cpu, linear_fit, markdown_table, secant_spp
 from dpm import load_scene
 from dpm.io import linear_to_srgb8, read_exr
 from dpm.methods.auto import has_specular
@@ -124,17 +124,13 @@ def run_scene(name: str, width: int, times: list[float]) -> dict:
         # passes; a cold cache once cost the dragon's 4 s run 48 s of compiling)
         dpm_run(path, width, height, max(times), 0, folder)
         mitsuba_run(desc, CALIBRATION_SPP[0], 0)
-        lo, hi = ((spp, mitsuba_run(desc, spp, 0)[1]) for spp in CALIBRATION_SPP)
-        per_spp = max((hi[1] - lo[1]) / (hi[0] - lo[0]), 1e-6)
-        fixed = lo[1] - per_spp * lo[0]
+        fixed, per_spp = linear_fit(*((n, mitsuba_run(desc, n, 0)[1]) for n in CALIBRATION_SPP))
         for i, budget in enumerate(times):
             ours, ours_s, stats = dpm_run(path, width, height, budget, i + 1, folder)
             spp = max(1, round((ours_s - fixed) / per_spp))
             theirs, theirs_s = mitsuba_run(desc, spp, i + 1)
             if abs(theirs_s - ours_s) > 0.05 * ours_s:  # the fit missed: one secant step
-                rate = max(theirs_s - fixed, 1e-3) / spp
-                # within 4x of the fit: a noisy fixed cost near theirs_s once asked 79,119 spp
-                spp = min(max(round((ours_s - fixed) / rate), spp // 4, 1), 4 * spp)
+                spp = secant_spp(spp, theirs_s, fixed, ours_s)
                 theirs, theirs_s = mitsuba_run(desc, spp, i + 1)
             rows.append({
                 "budget": budget, "dpm_s": ours_s, "dpm_rmse": rmse(ours, ref),

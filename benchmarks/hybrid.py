@@ -33,7 +33,7 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 
-from common import RESULTS, SCENES, cpu, timed
+from common import RESULTS, SCENES, cpu, linear_fit, secant_spp, timed
 from dpm import load_scene
 from dpm.camera import Camera
 from dpm.denoise import denoise
@@ -153,18 +153,16 @@ def equal_time_spp(fn, budget: float) -> int:
 
     After a warm-up, the time is fitted as fixed + per-sample cost from two sample counts;
     where that fit misses the budget by more than 5 % at its own answer (small counts time
-    poorly), it is refitted once through that run and the lower count.
+    poorly), one secant step through that run and the fit's fixed cost (`secant_spp`).
     """
     fn(1)
-    lo, hi = CALIBRATION_SPP, 4 * CALIBRATION_SPP
-    t_lo, t_hi = (timed(lambda n=n: fn(n))[1][0] for n in (lo, hi))
-    per_spp = max((t_hi - t_lo) / (hi - lo), 1e-9)
-    spp = max(1, int((budget - (t_lo - per_spp * lo)) / per_spp))
+    counts = (CALIBRATION_SPP, 4 * CALIBRATION_SPP)
+    fixed, per_spp = linear_fit(*((n, timed(lambda n=n: fn(n))[1][0]) for n in counts))
+    spp = max(1, int((budget - fixed) / per_spp))
     seconds = timed(lambda: fn(spp))[1][0]
-    if abs(seconds / budget - 1) <= 0.05 or spp <= lo:
+    if abs(seconds / budget - 1) <= 0.05 or spp <= CALIBRATION_SPP:
         return spp
-    per_spp = max((seconds - t_lo) / (spp - lo), 1e-9)
-    return max(1, int((budget - (t_lo - per_spp * lo)) / per_spp))
+    return secant_spp(spp, seconds, fixed, budget)
 
 
 def run_scene(name: str, width: int, k: int, weights: Path | None) -> dict:
