@@ -153,7 +153,7 @@ def equal_time_spp(fn, budget: float) -> int:
 
     After a warm-up, the time is fitted as fixed + per-sample cost from two sample counts;
     where that fit misses the budget by more than 5 % at its own answer (small counts time
-    poorly), one secant step through that run and the fit's fixed cost (`secant_spp`).
+    poorly), it takes one secant step through that run and the fit's fixed cost (`secant_spp`).
     """
     fn(1)
     counts = (CALIBRATION_SPP, 4 * CALIBRATION_SPP)
