@@ -10,8 +10,8 @@ example scene (default the ring; its caustic photons of M emitted paths, seed 0)
 - seconds of the gather (the cKDTree's K-nearest queries alone) and of the network stage:
   what `predict_points` takes beyond the gather (building the steps, reading the photons and
   checking their normals inside the jit, features, the network, Eq. 2; it runs while the
-  next block of points is gathered), each the best of 5 runs after compilation (as many
-  as each matmul of the peak gets);
+  next block of points is gathered), each the best of 5 tries after compilation (as many
+  as each matmul of the peak gets), the rows trying in turn, round after round;
 - achieved GFLOP/s (executed FLOPs over the network's seconds) and its fraction of the peak:
   the best fp32 matmul rate JAX reaches here in the same run (n×n by n×n, with XLA's own dots
   and with its experimental YNNPACK dots, whichever is faster);
@@ -28,7 +28,9 @@ from __future__ import annotations
 import argparse
 import datetime
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
+from functools import partial
 
 import jax
 import jax.numpy as jnp
@@ -139,38 +141,52 @@ def scene_points(name: str, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray,
     return points.position[hit], points.normal[hit], points.albedo[hit], PhotonIndex(photons)
 
 
-def time_network(predict, params: dict, index: PhotonIndex, points: tuple, k: int, rounds: int):
-    """Fewest seconds of (network, gather) over `rounds` runs after one warm-up: gather is the
-    K-nearest queries alone, network what `predict_points` takes beyond them (it overlaps the
-    two); points: positions, normals, albedos (n, 3)."""
-    position, normal, _ = points
-
-    def gather() -> None:
-        for _ in index.nearest(position, normal, k, agree=False):
-            pass
-
-    total = best_of(lambda: predict_points(predict, params, index, *points, k), rounds)
-    alone = best_of(gather, rounds)
-    return total - alone, alone
+def seconds_of(fn: Callable[[], object]) -> float:
+    """Wall seconds of one call of fn."""
+    start = time.perf_counter()
+    fn()
+    return time.perf_counter() - start
 
 
 def measure(name: str, points: tuple[int, ...], rounds: int) -> list[dict]:
-    """One row per (K, points): FLOPs, network and gather seconds, GFLOP/s."""
-    rows = []
+    """One row per (K, points): FLOPs, network and gather seconds (each the fewest of `rounds`
+    tries after a warm-up), GFLOP/s. Gather is the K-nearest queries alone, network what
+    `predict_points` takes beyond them (it overlaps the two). The rows take their tries in
+    turn, round after round, so that a slow spell of the machine cannot fall on every try of
+    one row."""
+    models = {}
+    for k in KS:
+        weights = load_weights(shipped_weights(k))
+        params = jax.tree.map(jnp.asarray, weights.params)
+        models[k] = make_query_predict(weights.model()), params, flops_per_point(params, k)
+    runs = []  # (k, points, whole stage, gather alone)
     for n in points:
         position, normal, albedo, index = scene_points(name, n)
         for k in KS:
-            weights = load_weights(shipped_weights(k))
-            predict = make_query_predict(weights.model())
-            params = jax.tree.map(jnp.asarray, weights.params)
-            network, gather = time_network(
-                predict, params, index, (position, normal, albedo), k, rounds
-            )
-            executed, written = flops_per_point(weights.params, k)
-            rows.append({"k": k, "points": n, "executed": executed, "written": written,
-                         "network_s": network, "gather_s": gather,
-                         "gflops": n * executed / network / 1e9})  # fmt: skip
+            predict, params, _ = models[k]
+            whole = partial(predict_points, predict, params, index, position, normal, albedo, k)
+            gather = partial(gather_only, index, position, normal, k)
+            runs.append((k, n, whole, gather))
+    best = np.full((len(runs), 2), np.inf)
+    for round_ in range(rounds + 1):  # round 0 warms up (compiles) and is not counted
+        for i, (_, _, whole, gather) in enumerate(runs):
+            tried = seconds_of(whole), seconds_of(gather)
+            if round_:
+                best[i] = np.minimum(best[i], tried)
+    rows = []
+    for (k, n, _, _), (total, gather) in zip(runs, best, strict=True):
+        executed, written = models[k][2]
+        network = total - gather
+        rows.append({"k": k, "points": n, "executed": executed, "written": written,
+                     "network_s": network, "gather_s": gather,
+                     "gflops": n * executed / network / 1e9})  # fmt: skip
     return rows
+
+
+def gather_only(index: PhotonIndex, position: np.ndarray, normal: np.ndarray, k: int) -> None:
+    """The K-nearest queries of points (n, 3) with normals (n, 3) alone, results dropped."""
+    for _ in index.nearest(position, normal, k, agree=False):
+        pass
 
 
 def report(rows: list[dict], peak: float, alone: float, name: str) -> list[str]:
