@@ -117,15 +117,17 @@ def layers_alone(params: dict, rows: int, rounds: int) -> float:
     return 2 * width * len(layers) * x.size / seconds / 1e9  # x.size / width photon rows
 
 
-def best_of(fn, rounds: int) -> float:
+def seconds_of(fn: Callable[[], object]) -> float:
+    """Wall seconds of one call of fn."""
+    start = time.perf_counter()
+    fn()
+    return time.perf_counter() - start
+
+
+def best_of(fn: Callable[[], object], rounds: int) -> float:
     """Fewest wall seconds of fn over `rounds` runs after one warm-up."""
     fn()
-    seconds = []
-    for _ in range(rounds):
-        start = time.perf_counter()
-        fn()
-        seconds.append(time.perf_counter() - start)
-    return min(seconds)
+    return min(seconds_of(fn) for _ in range(rounds))
 
 
 def scene_points(name: str, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, PhotonIndex]:
@@ -139,13 +141,6 @@ def scene_points(name: str, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray,
     hit = np.resize(np.flatnonzero(points.hit), n)
     photons = trace_photons(scene, bvh, M, seed=0, caustic_only=True)
     return points.position[hit], points.normal[hit], points.albedo[hit], PhotonIndex(photons)
-
-
-def seconds_of(fn: Callable[[], object]) -> float:
-    """Wall seconds of one call of fn."""
-    start = time.perf_counter()
-    fn()
-    return time.perf_counter() - start
 
 
 def measure(name: str, points: tuple[int, ...], rounds: int) -> list[dict]:
