@@ -28,6 +28,7 @@ from dpm.nn.infer import (
     neighbourhoods,
     point_radiance,
     predict_points,
+    use_fused,
 )
 from dpm.nn.losses import loss_value, mu_law
 from dpm.nn.model import make_model
@@ -179,11 +180,16 @@ def test_jit_vmap_inference_equals_a_plain_per_point_implementation(monkeypatch)
     np.testing.assert_allclose(out, plain, rtol=2e-4, atol=1e-7)
 
 
+@pytest.mark.parametrize("fused", [True, False])
 @pytest.mark.parametrize("n_photons", [3000, K])
-def test_fast_inference_equals_the_flax_module_point_by_point(n_photons: int) -> None:
-    """`make_query_predict` (photons gathered inside the jit, feature-major flat matmuls)
-    equals the Flax module applied point by point to numpy-gathered Batches, far from the
-    origin (the offsets keep their float64 accuracy), and with exactly K photons."""
+def test_fast_inference_equals_the_flax_module_point_by_point(
+    n_photons: int, fused: bool, monkeypatch
+) -> None:
+    """`make_query_predict` (photons gathered inside the jit; the fused CPU kernel, or
+    feature-major flat matmuls) equals the Flax module applied point by point to
+    numpy-gathered Batches, far from the origin (the offsets keep their float64 accuracy), and
+    with exactly K photons."""
+    monkeypatch.setattr("dpm.nn.infer.FUSED", fused)
     shift = np.float32([1000.0, 0.0, -2000.0])
     photons = plane_photons(n_photons, 7)
     photons = replace(photons, position=photons.position + shift)
@@ -193,8 +199,9 @@ def test_fast_inference_equals_the_flax_module_point_by_point(n_photons: int) ->
     normal = np.tile(np.float32([0, 1, 0]), (n, 1))
     normal[::9] = np.float32([0, -1, 0])  # no valid photon
     albedo = rng.uniform(0.2, 0.9, (n, 3)).astype(np.float32)
-    model = make_model("dpm", 8)
+    model = make_model("dpm", 32)  # the fused kernel's width
     params = random_params(model, 9)
+    assert use_fused(params["params"]) == fused
     fast = predict_points(make_query_predict(model), params, photons, position, normal, albedo, K)
     b = next(neighbourhoods(photons, position, normal, albedo, K))[1]
     slow = jax.jit(jax.vmap(lambda p, one: point_radiance(model, p, one), (None, 0)))

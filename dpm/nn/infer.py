@@ -34,12 +34,14 @@ from dpm.nn.features import (
     kernel_estimate,
     local_frame,
 )
+from dpm.nn.fused import available, fused_logits, pack_params, supports
 from dpm.nn.model import SHIFT, KernelNet
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap
 
 ACTIVATIONS_PER_CHUNK = 1 << 11  # points per chunk × K: activations (32 × this) stay in L2
 BLOCKS_IN_FLIGHT = 2  # parts of a block run at once: one's serial parts overlap the other's
+FUSED = True  # render with the fused CPU kernel where it applies (`use_fused`)
 
 
 class Batch(NamedTuple):
@@ -92,10 +94,22 @@ def kernel_head(
     flux: jnp.ndarray,
     albedo: jnp.ndarray,
     radius: jnp.ndarray,
+    fused: bool = False,
 ) -> jnp.ndarray:
     """(B, 3) radiance of B points from the network inputs x (9, B, K) of their K photons
-    (valid (B, K), stored flux (B, K, 3), albedo (B, 3), bandwidth (B,)): KernelNet as flat
-    matmuls, then Eq. 2.
+    (valid (B, K), stored flux (B, K, 3), albedo (B, 3), bandwidth (B,)): KernelNet's logits
+    (`kernel_logits`, or with `fused` the fused CPU kernel of `dpm.nn.fused`), then Eq. 2."""
+    if fused:
+        z = fused_logits(pack_params(p), x, valid)
+    else:
+        z = kernel_logits(p, x, valid)
+    weight = jnp.where(valid, jax.nn.softplus(z + SHIFT), 0.0)
+    return jax.vmap(kernel_estimate)(weight, flux, valid, albedo, radius)
+
+
+def kernel_logits(p: dict, x: jnp.ndarray, valid: jnp.ndarray) -> jnp.ndarray:
+    """(B, K) KernelNet logits (before softplus) from inputs x (9, B, K) and valid (B, K), as
+    flat matmuls.
 
     Activations are feature-major, (width, B·K): each layer is one (width × width) by
     (width × B·K) product, which XLA's dots run faster than the thin (B·K × width) by
@@ -119,9 +133,7 @@ def kernel_head(
     context = _dense({"kernel": shared, "bias": first["bias"]}, jnp.concatenate([biggest, mean]))
     z = jax.nn.relu((own.T @ h).reshape(width, n, k) + context[:, :, None])
     z = jax.nn.relu(_dense(p["Dense_1"], z.reshape(width, n * k)))
-    z = _dense(p["Dense_2"], z).reshape(n, k)
-    weight = jnp.where(valid, jax.nn.softplus(z + SHIFT), 0.0)
-    return jax.vmap(kernel_estimate)(weight, flux, valid, albedo, radius)
+    return _dense(p["Dense_2"], z).reshape(n, k)
 
 
 def batch_radiance(model: nn.Module) -> Callable[[dict, Batch], jnp.ndarray]:
@@ -217,7 +229,15 @@ def query_radiance(params: dict, table: PhotonTable, q: Query) -> jnp.ndarray:
     x = jnp.concatenate(
         [in_frame(offset) * inv_r[:, None], in_frame(column[DIRECTION]), column[FLUX_FEATURE]]
     )
-    return kernel_head(params["params"], x, valid, photon[..., FLUX], q.albedo, q.radius)
+    p = params["params"]
+    fused = use_fused(p)
+    return kernel_head(p, x, valid, photon[..., FLUX], q.albedo, q.radius, fused)
+
+
+def use_fused(p: dict) -> bool:
+    """Whether rendering evaluates KernelNet params p (the "params" tree) with the fused CPU
+    kernel: on the CPU, for the architecture it is built for (else XLA's flat matmuls)."""
+    return FUSED and available() and supports(p)
 
 
 def make_query_predict(

@@ -1,0 +1,435 @@
+"""KernelNet's layers as one fused CPU kernel that `jax.jit` calls (an XLA FFI custom call).
+
+XLA runs each 32×32 layer as its own dot over an L2-sized step of photon rows and reaches
+about 0.45 of the machine's matmul peak on these shapes. This kernel (Numba) instead carries a
+tile of TILE photons' activations (photon-major rows of WIDTH floats) through the layers in L1,
+each layer a register-blocked micro-kernel (`_block_codegen`: PHOTONS photons × WIDTH outputs
+held in vector accumulators, unrolled over the inputs; the predictor's last two layers end
+in the output dot), and pools each point's photons in one pass (`_pool`). It computes what
+`infer.kernel_logits` computes, (9, N) features to (N,) logits, for the shipped architecture
+(9 input channels, width 32); `fused_logits` is the jittable, pure function that calls it. One
+call is single-threaded and a photon's result depends on its own point's photons alone, so the
+output does not depend on how calls are spread over threads. Its sums run in another order than
+XLA's: equal within float rounding (tested).
+
+The handler speaks the typed XLA FFI C API (`xla/ffi/api/c_api.h`, which XLA keeps binary
+stable) directly: it answers XLA's metadata query with the API version and, when executed,
+reads the buffers from the call frame.
+"""
+
+from __future__ import annotations
+
+import ctypes
+
+import jax
+import jax.numpy as jnp
+import numba as nb
+import numpy as np
+from llvmlite import ir
+from numba.core import cgutils, types
+from numba.extending import intrinsic
+
+CHANNELS = 9  # input features per photon
+WIDTH = 32  # channels of every hidden layer
+LANES = 16  # floats per vector register (AVX-512; narrower machines split each vector)
+VECTORS = WIDTH // LANES  # vectors per activation row
+PHOTONS = 4  # photons a micro-kernel block carries: PHOTONS × VECTORS accumulators
+TILE = 128  # photons carried through the layers together (activations 16 KiB, in L1)
+TARGET = "dpm_kernelnet_logits"
+
+# Packed parameters: (name in the Flax tree, shape) in order; see `pack_params`.
+LAYOUT = (
+    (("Extractor_0", "Dense_0", "kernel"), (CHANNELS, WIDTH)),
+    (("Extractor_0", "Dense_0", "bias"), (WIDTH,)),
+    (("Extractor_0", "Dense_1", "kernel"), (WIDTH, WIDTH)),
+    (("Extractor_0", "Dense_1", "bias"), (WIDTH,)),
+    (("Extractor_0", "Dense_2", "kernel"), (WIDTH, WIDTH)),
+    (("Extractor_0", "Dense_2", "bias"), (WIDTH,)),
+    (("Dense_0", "kernel"), (3 * WIDTH, WIDTH)),  # [photon feature, max, mean] inputs
+    (("Dense_0", "bias"), (WIDTH,)),
+    (("Dense_1", "kernel"), (WIDTH, WIDTH)),
+    (("Dense_1", "bias"), (WIDTH,)),
+    (("Dense_2", "kernel"), (WIDTH, 1)),
+    (("Dense_2", "bias"), (1,)),
+)
+_STARTS = tuple(int(s) for s in np.cumsum([0] + [np.prod(shape) for _, shape in LAYOUT]))
+PACKED = _STARTS[-1]  # floats of the packed parameters
+
+
+def supports(p: dict) -> bool:
+    """Whether KernelNet params p (the "params" tree) have the shapes this kernel runs."""
+    try:
+        for path, shape in LAYOUT:
+            leaf = p
+            for name in path:
+                leaf = leaf[name]
+            if tuple(leaf.shape) != shape:
+                return False
+    except (KeyError, TypeError):
+        return False
+    return True
+
+
+def pack_params(p: dict) -> jnp.ndarray:
+    """(PACKED,) float32: KernelNet params p (the "params" tree) flattened in LAYOUT's order."""
+    parts = []
+    for path, _ in LAYOUT:
+        leaf = p
+        for name in path:
+            leaf = leaf[name]
+        parts.append(jnp.ravel(jnp.asarray(leaf, jnp.float32)))
+    return jnp.concatenate(parts)
+
+
+def _block_codegen(n_in: int, relu: bool, head: bool):
+    """LLVM IR of one micro-kernel block: for photons p < PHOTONS, output row
+    y[y0 + p, :] = (ReLU of) init[owner[o0 + p], :] + Σ_i x[x0 + p·xp + i·xi] · w[i, :], float32,
+    with fused multiply-adds. Photon-major rows of WIDTH floats; x has any strides. With
+    `head`, y is 1-D and gets y[y0 + p] = row · head (the last argument, WIDTH floats) instead,
+    summed as a fixed pairwise tree."""
+
+    def codegen(context, builder, sig, args):
+        f32, i32, i64 = ir.FloatType(), ir.IntType(32), ir.IntType(64)
+        vf = ir.VectorType(f32, LANES)
+        w, init, owner, x, y = (
+            context.make_array(sig.args[i])(context, builder, args[i]) for i in range(5)
+        )
+        o0, x0, xp, xi, y0 = (
+            context.cast(builder, args[i], sig.args[i], types.int64) for i in range(5, 10)
+        )
+
+        def const(v):
+            return ir.Constant(i64, v)
+
+        def vector(data, at):
+            return builder.bitcast(builder.gep(data, [at]), vf.as_pointer())
+
+        def splat(s):
+            v = builder.insert_element(ir.Constant(vf, ir.Undefined), s, ir.Constant(i32, 0))
+            return builder.shuffle_vector(v, v, ir.Constant(ir.VectorType(i32, LANES), [0] * LANES))
+
+        acc = []
+        for p in range(PHOTONS):
+            row = builder.load(builder.gep(owner.data, [builder.add(o0, const(p))]))
+            at = builder.mul(row, const(WIDTH))
+            acc.append(
+                [
+                    builder.load(vector(init.data, builder.add(at, const(v * LANES))), align=4)
+                    for v in range(VECTORS)
+                ]
+            )
+        photon = [builder.add(x0, builder.mul(xp, const(p))) for p in range(PHOTONS)]
+        for i in range(n_in):
+            ws = [
+                builder.load(vector(w.data, const(i * WIDTH + v * LANES)), align=4)
+                for v in range(VECTORS)
+            ]
+            feature = builder.mul(xi, const(i))
+            for p in range(PHOTONS):
+                xs = splat(builder.load(builder.gep(x.data, [builder.add(photon[p], feature)])))
+                for v in range(VECTORS):
+                    product = builder.fmul(xs, ws[v], flags=["contract"])
+                    acc[p][v] = builder.fadd(product, acc[p][v], flags=["contract"])
+        zero = ir.Constant(vf, [0.0] * LANES)
+        if relu:
+            acc = [[builder.select(builder.fcmp_ordered(">", a, zero), a, zero) for a in row]
+                   for row in acc]  # fmt: skip
+        if head:
+            last = context.make_array(sig.args[10])(context, builder, args[10])
+            hs = [
+                builder.load(vector(last.data, const(v * LANES)), align=4) for v in range(VECTORS)
+            ]
+            for p in range(PHOTONS):
+                t = builder.fmul(acc[p][0], hs[0])
+                for v in range(1, VECTORS):
+                    t = builder.fadd(t, builder.fmul(acc[p][v], hs[v]))
+                n = LANES
+                while n > 1:  # pairwise: lanes [0, n/2) plus [n/2, n)
+                    n //= 2
+                    lo = builder.shuffle_vector(
+                        t, t, ir.Constant(ir.VectorType(i32, n), list(range(n)))
+                    )
+                    hi = builder.shuffle_vector(
+                        t, t, ir.Constant(ir.VectorType(i32, n), list(range(n, 2 * n)))
+                    )
+                    t = builder.fadd(lo, hi)
+                total = builder.extract_element(t, ir.Constant(i32, 0))
+                builder.store(total, builder.gep(y.data, [builder.add(y0, const(p))]))
+            return context.get_dummy_value()
+        for p in range(PHOTONS):
+            at = builder.mul(builder.add(y0, const(p)), const(WIDTH))
+            for v in range(VECTORS):
+                builder.store(acc[p][v], vector(y.data, builder.add(at, const(v * LANES))), align=4)
+        return context.get_dummy_value()
+
+    return codegen
+
+
+def _make_block(n_in: int, head: bool = False):
+    """The micro-kernel intrinsic for n_in inputs, ReLU, and with `head` the output dot."""
+    if head:
+
+        def block(typingctx, w, init, owner, x, y, o0, x0, xp, xi, y0, last):
+            sig = types.void(w, init, owner, x, y, o0, x0, xp, xi, y0, last)
+            return sig, _block_codegen(n_in, True, True)
+    else:
+
+        def block(typingctx, w, init, owner, x, y, o0, x0, xp, xi, y0):
+            sig = types.void(w, init, owner, x, y, o0, x0, xp, xi, y0)
+            return sig, _block_codegen(n_in, True, False)
+
+    block.__name__ = f"_block_{n_in}{'_head' if head else ''}"
+    return intrinsic(block)
+
+
+_first_block = _make_block(CHANNELS)
+_hidden_block = _make_block(WIDTH)
+_head_block = _make_block(WIDTH, head=True)
+
+
+def _pool_codegen(context, builder, sig, args):
+    """LLVM IR of `_pool`: one pass over a point's k photon rows, max and sum in registers."""
+    f32, i32, i64 = ir.FloatType(), ir.IntType(32), ir.IntType(64)
+    vf = ir.VectorType(f32, LANES)
+    features, valid, pooled = (context.make_array(sig.args[i])(context, builder, args[i])
+                               for i in (0, 1, 3))  # fmt: skip
+    point = context.cast(builder, args[2], sig.args[2], types.int64)
+    k = builder.extract_value(valid.shape, 1)
+    first = builder.mul(point, k)
+    zero = ir.Constant(vf, [0.0] * LANES)
+    biggest = [cgutils.alloca_once_value(builder, zero) for _ in range(VECTORS)]
+    sums = [cgutils.alloca_once_value(builder, zero) for _ in range(VECTORS)]
+    count = cgutils.alloca_once_value(builder, ir.Constant(f32, 0.0))
+
+    def vector(data, at):
+        return builder.bitcast(builder.gep(data, [at]), vf.as_pointer())
+
+    with cgutils.for_range(builder, k, intp=i64) as loop:
+        photon = builder.add(first, loop.index)
+        m = builder.load(builder.gep(valid.data, [photon]))
+        builder.store(builder.fadd(builder.load(count), m), count)
+        ms = builder.insert_element(ir.Constant(vf, ir.Undefined), m, ir.Constant(i32, 0))
+        ms = builder.shuffle_vector(ms, ms, ir.Constant(ir.VectorType(i32, LANES), [0] * LANES))
+        row = builder.mul(photon, ir.Constant(i64, WIDTH))
+        for v in range(VECTORS):
+            at = builder.add(row, ir.Constant(i64, v * LANES))
+            x = builder.fmul(builder.load(vector(features.data, at), align=4), ms)
+            big = builder.load(biggest[v])
+            builder.store(builder.select(builder.fcmp_ordered(">", x, big), x, big), biggest[v])
+            builder.store(builder.fadd(builder.load(sums[v]), x), sums[v])
+    n = builder.load(count)
+    n = builder.select(
+        builder.fcmp_ordered(">", n, ir.Constant(f32, 1.0)), n, ir.Constant(f32, 1.0)
+    )
+    ns = builder.insert_element(ir.Constant(vf, ir.Undefined), n, ir.Constant(i32, 0))
+    ns = builder.shuffle_vector(ns, ns, ir.Constant(ir.VectorType(i32, LANES), [0] * LANES))
+    for v in range(VECTORS):
+        builder.store(
+            builder.load(biggest[v]), vector(pooled.data, ir.Constant(i64, v * LANES)), align=4
+        )
+        mean = builder.fdiv(builder.load(sums[v]), ns)
+        builder.store(mean, vector(pooled.data, ir.Constant(i64, WIDTH + v * LANES)), align=4)
+    return context.get_dummy_value()
+
+
+@intrinsic
+def _pool(typingctx, features, valid, point, pooled):
+    """pooled (2·WIDTH,) = [max, mean] over the valid photons of point (rows point·k ... of
+    photon-major features (N, WIDTH); valid (n, k) as 1.0/0.0), the max 0 when none is valid
+    (ReLU features are ≥ 0, so masking with 0 keeps the max)."""
+    return types.void(features, valid, point, pooled), _pool_codegen
+
+
+@nb.njit(cache=True, inline="always")
+def _layer_first(w, b, x, y, x0, xi, zero_rows):
+    """y[:TILE] = relu(w · x + b) on TILE photons of feature-major x (photon x0 + p at
+    x0 + p, feature i at i·xi), photon-major out."""
+    for p in range(0, TILE, PHOTONS):
+        _first_block(w, b, zero_rows, x, y, 0, x0 + p, 1, xi, p)
+
+
+@nb.njit(cache=True, inline="always")
+def _layer(w, init, owner, o0, x, row0, y, y0):
+    """y[y0 : y0 + TILE] = relu(x[row0 : row0 + TILE] · w + init[owner[o0 + p]]), photon-major."""
+    for p in range(0, TILE, PHOTONS):
+        _hidden_block(w, init, owner, x, y, o0 + p, (row0 + p) * WIDTH, WIDTH, 1, y0 + p)
+
+
+@nb.njit(cache=True, inline="always")
+def _part(packed, i):
+    """Entry i of LAYOUT in the packed params, flat."""
+    return packed[_STARTS[i] : _STARTS[i + 1]]
+
+
+@nb.njit(cache=True, error_model="numpy")
+def logits_kernel(x, valid, packed, out):
+    """KernelNet's logits out (N,) from features x (CHANNELS, N) of n points' k photons each
+    (N = n·k, point-major), valid (n, k) as 1.0/0.0 and the packed params (PACKED,)."""
+    n, k = valid.shape
+    total = n * k
+    e0w, e0b = _part(packed, 0).reshape(CHANNELS, WIDTH), _part(packed, 1)
+    e1w, e1b = _part(packed, 2).reshape(WIDTH, WIDTH), _part(packed, 3)
+    e2w, e2b = _part(packed, 4).reshape(WIDTH, WIDTH), _part(packed, 5)
+    d0w, d0b = _part(packed, 6).reshape(3 * WIDTH, WIDTH), _part(packed, 7)
+    d1w, d1b = _part(packed, 8).reshape(WIDTH, WIDTH), _part(packed, 9)
+    d2w, d2b = _part(packed, 10), _part(packed, 11)[0]
+    own = d0w[:WIDTH]
+    tiles = -(-total // TILE)
+    padded = tiles * TILE
+    zero_rows = np.zeros(TILE, np.int64)  # every photon's init row is row 0: the bias
+    owner = np.empty(padded, np.int64)  # each photon's point (the last for the padding)
+    for j in range(padded):
+        owner[j] = min(j, total - 1) // k
+    features = np.empty((padded, WIDTH), np.float32)  # the extractor's output, photon-major
+    tile_in = np.zeros((CHANNELS, TILE), np.float32)
+    a = np.empty((TILE, WIDTH), np.float32)
+    c = np.empty((TILE, WIDTH), np.float32)
+    e0b, e1b, e2b = e0b.reshape(1, WIDTH), e1b.reshape(1, WIDTH), e2b.reshape(1, WIDTH)
+    d1b = d1b.reshape(1, WIDTH)
+    # 1: the extractor, tile by tile (the last, partial tile through a zero-padded copy)
+    for t in range(tiles):
+        start = t * TILE
+        if start + TILE <= total:
+            _layer_first(e0w, e0b, x, a, start, total, zero_rows)
+        else:
+            for ch in range(CHANNELS):
+                for j in range(TILE):
+                    tile_in[ch, j] = x[ch, start + j] if start + j < total else 0.0
+            _layer_first(e0w, e0b, tile_in, a, 0, TILE, zero_rows)
+        _layer(e1w, e1b, zero_rows, 0, a, 0, c, 0)
+        _layer(e2w, e2b, zero_rows, 0, c, 0, features, start)
+    # 2: each point's context, Dense_0's pooled half: max and mean over its valid photons
+    # (`_pool`), then its pooled half of Dense_0, once per point (the loop over outputs
+    # innermost, contiguous, so it vectorizes)
+    pooled = np.empty(2 * WIDTH, np.float32)
+    context = np.empty((n, WIDTH), np.float32)
+    for point in range(n):
+        _pool(features, valid, point, pooled)
+        for o in range(WIDTH):
+            context[point, o] = d0b[o]
+        for i in range(2 * WIDTH):
+            for o in range(WIDTH):
+                context[point, o] += d0w[WIDTH + i, o] * pooled[i]
+    # 3: the predictor, tile by tile: relu(own · feature + context) → ReLU layer → logit
+    logit = np.empty(TILE, np.float32)
+    for t in range(tiles):
+        start = t * TILE
+        _layer(own, context, owner, start, features, start, a, 0)
+        for p in range(0, TILE, PHOTONS):
+            _head_block(d1w, d1b, zero_rows, a, logit, 0, p * WIDTH, WIDTH, 1, p, d2w)
+        for j in range(min(TILE, total - start)):
+            out[start + j] = logit[j] + d2b
+
+
+# --- the XLA FFI handler: raw call-frame access (offsets of c_api.h's structs on 64-bit) ---
+_EXTENSION, _STAGE, _ARGS, _RETS = 8, 32, 72, 112  # call frame: extension_start, stage,
+# args.args, rets.rets
+_EXT_TYPE, _EXT_METADATA = 8, 24  # extension base: type; metadata extension: metadata pointer
+_META_VERSION, _META_TRAITS = 8, 32  # metadata: api_version struct, traits
+_BUFFER_DATA, _BUFFER_DIMS = 24, 40  # buffer: data, dims
+_API_MAJOR, _API_MINOR = 0, 1  # the FFI version whose structs these offsets follow
+_METADATA_KIND, _EXECUTE = 1, 3
+
+
+@intrinsic
+def _load(typingctx, address, offset, kind):
+    """The value of type `kind` (int32 / int64) at byte address + offset."""
+    result = kind.instance_type
+
+    def codegen(context, builder, sig, args):
+        ptr = builder.add(args[0], args[1])
+        width = context.get_value_type(result)
+        return builder.load(builder.inttoptr(ptr, width.as_pointer()))
+
+    return result(address, offset, kind), codegen
+
+
+@intrinsic
+def _store(typingctx, address, offset, value):
+    """Store value (int32 / int64) at byte address + offset."""
+
+    def codegen(context, builder, sig, args):
+        ptr = builder.add(args[0], args[1])
+        width = context.get_value_type(sig.args[2])
+        builder.store(args[2], builder.inttoptr(ptr, width.as_pointer()))
+        return context.get_dummy_value()
+
+    return types.void(address, offset, value), codegen
+
+
+@intrinsic
+def _pointer(typingctx, address):
+    """The int64 address as a void pointer (for `nb.carray`)."""
+
+    def codegen(context, builder, sig, args):
+        return builder.inttoptr(args[0], context.get_value_type(types.voidptr))
+
+    return types.voidptr(address), codegen
+
+
+@nb.njit(inline="always")
+def _buffer(list_address, i):
+    """(data address, dims address) of buffer i of an args / rets list."""
+    buffer = _load(list_address, 8 * i, nb.int64)
+    return _load(buffer, _BUFFER_DATA, nb.int64), _load(buffer, _BUFFER_DIMS, nb.int64)
+
+
+@nb.cfunc(types.int64(types.int64), cache=True)
+def _handler(frame):
+    """XLA FFI handler: args x (CHANNELS, N), valid (n, k), packed (PACKED,); ret (N,)."""
+    extension = _load(frame, _EXTENSION, nb.int64)
+    if extension != 0 and _load(extension, _EXT_TYPE, nb.int32) == _METADATA_KIND:
+        metadata = _load(extension, _EXT_METADATA, nb.int64)
+        version = metadata + _META_VERSION
+        _store(version, 0, nb.int64(24))  # struct_size of XLA_FFI_Api_Version
+        _store(version, 8, nb.int64(0))  # extension_start
+        _store(version, 16, nb.int32(_API_MAJOR))
+        _store(version, 20, nb.int32(_API_MINOR))
+        _store(metadata, _META_TRAITS, nb.int32(0))
+        return 0
+    if _load(frame, _STAGE, nb.int32) != _EXECUTE:
+        return 0
+    args, rets = _load(frame, _ARGS, nb.int64), _load(frame, _RETS, nb.int64)
+    x_data, x_dims = _buffer(args, 0)
+    valid_data, valid_dims = _buffer(args, 1)
+    packed_data, _ = _buffer(args, 2)
+    out_data, _ = _buffer(rets, 0)
+    total = _load(x_dims, 8, nb.int64)
+    n, k = _load(valid_dims, 0, nb.int64), _load(valid_dims, 8, nb.int64)
+    x = nb.carray(_pointer(x_data), (CHANNELS, total), np.float32)
+    valid = nb.carray(_pointer(valid_data), (n, k), np.float32)
+    packed = nb.carray(_pointer(packed_data), (PACKED,), np.float32)
+    out = nb.carray(_pointer(out_data), (total,), np.float32)
+    logits_kernel(x, valid, packed, out)
+    return 0
+
+
+_registered = False
+
+
+def _register() -> None:
+    """Register the handler with XLA's CPU platform (once per process)."""
+    global _registered
+    if not _registered:
+        address = ctypes.c_void_p(_handler.address)
+        jax.ffi.register_ffi_target(TARGET, jax.ffi.pycapsule(address), platform="cpu")
+        _registered = True
+
+
+def available() -> bool:
+    """Whether jitted code here runs on the CPU, where the fused kernel is registered."""
+    return jax.default_backend() == "cpu"
+
+
+def fused_logits(packed: jnp.ndarray, x: jnp.ndarray, valid: jnp.ndarray) -> jnp.ndarray:
+    """(n, k) KernelNet logits (before softplus) from packed params (PACKED,), features
+    x (CHANNELS, n, k) and valid (n, k) bool, by the fused kernel (CPU only)."""
+    if packed.shape != (PACKED,) or x.shape[0] != CHANNELS:
+        raise ValueError(f"the fused kernel runs {CHANNELS} channels and width {WIDTH} only")
+    _register()
+    channels, n, k = x.shape
+    call = jax.ffi.ffi_call(
+        TARGET, jax.ShapeDtypeStruct((n * k,), jnp.float32), vmap_method="sequential"
+    )
+    flat = x.reshape(channels, n * k).astype(jnp.float32)
+    return call(flat, valid.astype(jnp.float32), packed).reshape(n, k)
