@@ -7,8 +7,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from dpm.nn.fused import PACKED, fused_logits, logits_kernel, pack_params, supports
-from dpm.nn.infer import kernel_logits, use_fused
+from dpm.nn.fused import PACKED, available, logits_kernel, pack_params, supports
+from dpm.nn.infer import PhotonTable, Query, kernel_logits, query_radiance, use_fused
 from dpm.nn.model import make_model
 from dpm.nn.weights import load_weights, shipped_weights
 
@@ -38,16 +38,57 @@ def test_fused_kernel_equals_the_flat_matmuls(n: int, k: int) -> None:
     logits_kernel(x.reshape(9, -1), valid.astype(np.float32), np.asarray(pack_params(p)), out)
     scale = np.abs(expected).max()
     np.testing.assert_allclose(out.reshape(n, k), expected, rtol=1e-5, atol=1e-5 * scale)
-    jitted = jax.jit(jax.vmap(fused_logits, (None, 0, 0)))  # also under vmap
-    batched = np.asarray(jitted(pack_params(p), jnp.asarray(x)[None], jnp.asarray(valid)[None]))
-    np.testing.assert_array_equal(batched[0], out.reshape(n, k))
+
+
+def test_fused_radiance_equals_the_xla_path(monkeypatch) -> None:
+    """The whole fused estimate (reading the photon rows, normal check, canonical frame,
+    features, network, Eq. 2) equals XLA's `query_radiance` within float rounding, with
+    missing neighbours, disagreeing normals, a given frame angle, and under `vmap`."""
+    rng = np.random.default_rng(3)
+    n_photons, n, k = 400, 6, 37
+    rows = np.zeros((n_photons + 1, 16), np.float32)
+    rows[:-1, 0:3] = rng.normal(0, 0.05, (n_photons, 3)) + [10.0, 2.0, -5.0]
+    rows[:-1, 3:6] = unit(rng.normal(size=(n_photons, 3)))
+    rows[:-1, 6:9] = rng.uniform(0, 1e-4, (n_photons, 3))
+    rows[:-1, 9:12] = unit(rng.normal(size=(n_photons, 3)) * 0.4 + [0, 0, 1])
+    rows[:-1, 12:15] = rng.uniform(-1, 1, (n_photons, 3))
+    index = rng.integers(0, n_photons, (n, k)).astype(np.int32)
+    index[1, -5:] = n_photons  # missing neighbours
+    position = np.float64([10.0, 2.0, -5.0]) + rng.normal(0, 0.01, (n, 3))
+    hi = position.astype(np.float32)
+    normal = unit(rng.normal(size=(n, 3)) * 0.2 + [0, 0, 1]).astype(np.float32)
+    normal[2] = -normal[2]  # no photon agrees
+    angle = np.full(n, np.nan, np.float32)
+    angle[3] = 0.7
+    q = Query(index, hi, (position - hi).astype(np.float32), normal,
+              rng.uniform(0.2, 0.9, (n, 3)).astype(np.float32),
+              rng.uniform(0.02, 0.1, n).astype(np.float32), angle,
+              np.full(n, 1e5, np.float32))  # fmt: skip
+    params = {"params": random_params(32, 4)}
+    table = PhotonTable(jnp.asarray(rows))
+    fused = np.asarray(jax.jit(lambda *a: query_radiance(*a))(params, table, q))
+    monkeypatch.setattr("dpm.nn.infer.FUSED", False)  # a new function: traced afresh
+    xla = np.asarray(jax.jit(lambda *a: query_radiance(*a))(params, table, q))
+    assert np.all(fused[2] == 0) and np.abs(xla).max() > 0
+    np.testing.assert_allclose(fused, xla, rtol=1e-4, atol=1e-5 * np.abs(xla).max())
+    monkeypatch.setattr("dpm.nn.infer.FUSED", True)
+    stacked = Query(*(np.stack([a, a]) for a in q))
+    batched = jax.jit(jax.vmap(lambda *a: query_radiance(*a), (None, None, 0)))(
+        params, table, stacked
+    )
+    np.testing.assert_array_equal(np.asarray(batched), np.stack([fused, fused]))
+
+
+def unit(v: np.ndarray) -> np.ndarray:
+    """Rows of v (n, 3) scaled to unit length."""
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
 def test_the_kernel_serves_the_shipped_weights_only_where_it_applies() -> None:
     """The shipped DPM weights render with the fused kernel on the CPU; other widths
     (DPM-L) keep XLA's matmuls."""
     for k in (50, 500):
-        assert use_fused(load_weights(shipped_weights(k)).params["params"])
+        assert use_fused(load_weights(shipped_weights(k)).params["params"]) == available()
     wide = random_params(128, 0)
     assert not supports(wide) and not use_fused(wide)
     assert pack_params(random_params(32, 1)).shape == (PACKED,)

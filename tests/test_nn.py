@@ -21,6 +21,7 @@ from dpm.density import PM
 from dpm.errors import InputError
 from dpm.nn.config import Config, ModelConfig, TrainConfig, load_config
 from dpm.nn.features import flux_map, flux_unmap
+from dpm.nn.fused import available
 from dpm.nn.infer import (
     Batch,
     make_predict,
@@ -201,7 +202,7 @@ def test_fast_inference_equals_the_flax_module_point_by_point(
     albedo = rng.uniform(0.2, 0.9, (n, 3)).astype(np.float32)
     model = make_model("dpm", 32)  # the fused kernel's width
     params = random_params(model, 9)
-    assert use_fused(params["params"]) == fused
+    assert use_fused(params["params"]) == (fused and available())
     fast = predict_points(make_query_predict(model), params, photons, position, normal, albedo, K)
     b = next(neighbourhoods(photons, position, normal, albedo, K))[1]
     slow = jax.jit(jax.vmap(lambda p, one: point_radiance(model, p, one), (None, 0)))

@@ -1,16 +1,17 @@
-"""KernelNet's layers as one fused CPU kernel that `jax.jit` calls (an XLA FFI custom call).
+"""DPM's whole estimate as one fused CPU kernel that `jax.jit` calls (an XLA FFI custom call).
 
-XLA runs each 32×32 layer as its own dot over an L2-sized step of photon rows and reaches
-about 0.45 of the machine's matmul peak on these shapes. This kernel (Numba) instead carries a
+XLA runs each 32×32 layer of KernelNet as its own dot over an L2-sized step of photon rows
+(about 0.45 of the machine's matmul peak on these shapes) and fuses the gather of the photons'
+rows into each of its consumers. This kernel (Numba) does what `infer.query_radiance` does for
+a step of points in one call: it reads each photon's row once, checks its normal, forms the
+features in the point's canonical frame, runs the network and forms Eq. 2. The network carries a
 tile of TILE photons' activations (photon-major rows of WIDTH floats) through the layers in L1,
 each layer a register-blocked micro-kernel (`_block_codegen`: PHOTONS photons × WIDTH outputs
-held in vector accumulators, unrolled over the inputs; the predictor's last two layers end
-in the output dot), and pools each point's photons in one pass (`_pool`). It computes what
-`infer.kernel_logits` computes, (9, N) features to (N,) logits, for the shipped architecture
-(9 input channels, width 32); `fused_logits` is the jittable, pure function that calls it. One
-call is single-threaded and a photon's result depends on its own point's photons alone, so the
-output does not depend on how calls are spread over threads. Its sums run in another order than
-XLA's: equal within float rounding (tested).
+held in vector accumulators, unrolled over the inputs; the last hidden layer ends in the output
+dot), and pools each point's photons in one pass (`_pool`). It serves the shipped architecture
+(9 input channels, width 32; `supports`). One call is single-threaded and a point's result
+depends on its own photons alone, so the output does not depend on how calls are spread over
+threads. Its sums run in another order than XLA's: equal within float rounding (tested).
 
 The handler speaks the typed XLA FFI C API (`xla/ffi/api/c_api.h`, which XLA keeps binary
 stable) directly: it answers XLA's metadata query with the API version and, when executed,
@@ -29,13 +30,18 @@ from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
+from dpm.nn.features import MIN_RADIUS
+from dpm.nn.model import SHIFT
+from dpm.tracer.photon_grid import NORMAL_COS
+
 CHANNELS = 9  # input features per photon
 WIDTH = 32  # channels of every hidden layer
 LANES = 16  # floats per vector register (AVX-512; narrower machines split each vector)
 VECTORS = WIDTH // LANES  # vectors per activation row
 PHOTONS = 4  # photons a micro-kernel block carries: PHOTONS × VECTORS accumulators
 TILE = 128  # photons carried through the layers together (activations 16 KiB, in L1)
-TARGET = "dpm_kernelnet_logits"
+TARGET = "dpm_kernelnet_radiance"
+ROW = 16  # floats of a photon row (`infer.PhotonTable`)
 
 # Packed parameters: (name in the Flax tree, shape) in order; see `pack_params`.
 LAYOUT = (
@@ -321,6 +327,78 @@ def logits_kernel(x, valid, packed, out):
             out[start + j] = logit[j] + d2b
 
 
+@nb.njit(cache=True, error_model="numpy")
+def radiance_kernel(rows, index, hi, lo, normal, albedo, radius, angle, n_paths, packed, out):
+    """(n, 3) radiance out of n points from their K nearest photons, as `infer.query_radiance`
+    computes it: the photons' rows (P + 1, 16) of an `infer.PhotonTable` read by index (n, K)
+    (P: missing), the points' float32 position split hi + lo (n, 3), unit normals, albedos
+    (n, 3), bandwidths, frame angles (NaN: canonical) and N (n,), and packed params."""
+    n, k = index.shape
+    last = rows.shape[0] - 1  # the zero row of a missing neighbour
+    x = np.empty((CHANNELS, n * k), np.float32)
+    valid = np.empty((n, k), np.float32)
+    for point in range(n):
+        first = point * k
+        nx, ny, nz = normal[point, 0], normal[point, 1], normal[point, 2]
+        cx, cy, cz = np.float32(0.0), np.float32(0.0), np.float32(0.0)
+        for j in range(k):
+            i = index[point, j]
+            ox = (rows[i, 0] - hi[point, 0]) - lo[point, 0]
+            oy = (rows[i, 1] - hi[point, 1]) - lo[point, 1]
+            oz = (rows[i, 2] - hi[point, 2]) - lo[point, 2]
+            if i >= last:
+                ox, oy, oz = np.float32(0.0), np.float32(0.0), np.float32(0.0)
+            agree = rows[i, 9] * nx + rows[i, 10] * ny + rows[i, 11] * nz >= NORMAL_COS
+            valid[point, j] = 1.0 if agree else 0.0
+            if agree:
+                cx, cy, cz = cx + ox, cy + oy, cz + oz
+            x[0, first + j], x[1, first + j], x[2, first + j] = ox, oy, oz
+        t, s = _tangents(nx, ny, nz)
+        turn = angle[point]
+        if np.isnan(turn):  # the canonical angle: the first tangent towards the mean offset
+            turn = np.arctan2(cx * s[0] + cy * s[1] + cz * s[2], cx * t[0] + cy * t[1] + cz * t[2])
+        c, si = np.cos(turn), np.sin(turn)
+        f0 = (c * t[0] + si * s[0], c * t[1] + si * s[1], c * t[2] + si * s[2])
+        f1 = (-si * t[0] + c * s[0], -si * t[1] + c * s[1], -si * t[2] + c * s[2])
+        inv_r = np.float32(1.0) / max(radius[point], np.float32(MIN_RADIUS))
+        for j in range(k):
+            col, i = first + j, index[point, j]
+            ox, oy, oz = x[0, col], x[1, col], x[2, col]
+            dx, dy, dz = rows[i, 3], rows[i, 4], rows[i, 5]
+            x[0, col] = (f0[0] * ox + f0[1] * oy + f0[2] * oz) * inv_r
+            x[1, col] = (f1[0] * ox + f1[1] * oy + f1[2] * oz) * inv_r
+            x[2, col] = (nx * ox + ny * oy + nz * oz) * inv_r
+            x[3, col] = f0[0] * dx + f0[1] * dy + f0[2] * dz
+            x[4, col] = f1[0] * dx + f1[1] * dy + f1[2] * dz
+            x[5, col] = nx * dx + ny * dy + nz * dz
+            x[6, col], x[7, col], x[8, col] = rows[i, 12], rows[i, 13], rows[i, 14]
+    z = np.empty(n * k, np.float32)
+    logits_kernel(x, valid, packed, z)
+    for point in range(n):  # Eq. 2 with weights softplus(z + SHIFT) on the valid photons
+        total = np.zeros(3, np.float32)
+        for j in range(k):
+            if valid[point, j] > 0:
+                u = z[point * k + j] + np.float32(SHIFT)
+                w = max(u, np.float32(0.0)) + np.log1p(np.exp(-abs(u)))
+                i = index[point, j]
+                for ch in range(3):
+                    total[ch] += w * rows[i, 6 + ch]
+        r = max(radius[point], np.float32(MIN_RADIUS))
+        for ch in range(3):
+            out[point, ch] = albedo[point, ch] / np.pi * total[ch] / (np.pi * r * r)
+
+
+@nb.njit(cache=True, inline="always")
+def _tangents(nx, ny, nz):
+    """The tangents t, s of `features.local_frame` at angle 0 for the unit normal (Duff et al.)."""
+    sign = np.float32(1.0) if nz >= 0 else np.float32(-1.0)
+    a = np.float32(-1.0) / (sign + nz)
+    b = nx * ny * a
+    t = (np.float32(1.0) + sign * nx * nx * a, sign * b, -sign * nx)
+    s = (b, sign + ny * ny * a, -ny)
+    return t, s
+
+
 # --- the XLA FFI handler: raw call-frame access (offsets of c_api.h's structs on 64-bit) ---
 _EXTENSION, _STAGE, _ARGS, _RETS = 8, 32, 72, 112  # call frame: extension_start, stage,
 # args.args, rets.rets
@@ -374,44 +452,60 @@ def _buffer(list_address, i):
     return _load(buffer, _BUFFER_DATA, nb.int64), _load(buffer, _BUFFER_DIMS, nb.int64)
 
 
-@nb.cfunc(types.int64(types.int64), cache=True)
-def _handler(frame):
-    """XLA FFI handler: args x (CHANNELS, N), valid (n, k), packed (PACKED,); ret (N,)."""
+@nb.njit(inline="always")
+def _metadata_answered(frame):
+    """Whether the call is XLA's metadata query (then answered: the API version, no traits)."""
     extension = _load(frame, _EXTENSION, nb.int64)
-    if extension != 0 and _load(extension, _EXT_TYPE, nb.int32) == _METADATA_KIND:
-        metadata = _load(extension, _EXT_METADATA, nb.int64)
-        version = metadata + _META_VERSION
-        _store(version, 0, nb.int64(24))  # struct_size of XLA_FFI_Api_Version
-        _store(version, 8, nb.int64(0))  # extension_start
-        _store(version, 16, nb.int32(_API_MAJOR))
-        _store(version, 20, nb.int32(_API_MINOR))
-        _store(metadata, _META_TRAITS, nb.int32(0))
-        return 0
-    if _load(frame, _STAGE, nb.int32) != _EXECUTE:
+    if extension == 0 or _load(extension, _EXT_TYPE, nb.int32) != _METADATA_KIND:
+        return False
+    metadata = _load(extension, _EXT_METADATA, nb.int64)
+    version = metadata + _META_VERSION
+    _store(version, 0, nb.int64(24))  # struct_size of XLA_FFI_Api_Version
+    _store(version, 8, nb.int64(0))  # extension_start
+    _store(version, 16, nb.int32(_API_MAJOR))
+    _store(version, 20, nb.int32(_API_MINOR))
+    _store(metadata, _META_TRAITS, nb.int32(0))
+    return True
+
+
+@nb.njit(inline="always")
+def _array(list_address, i, shape, dtype):
+    """Buffer i of an args / rets list as an array of the given shape and dtype."""
+    data, _ = _buffer(list_address, i)
+    return nb.carray(_pointer(data), shape, dtype)
+
+
+def _handler(frame):
+    """XLA FFI handler of `fused_radiance`: args rows (P + 1, 16), index (n, K), hi, lo,
+    normal, albedo (n, 3), radius, angle, n_paths (n,), packed (PACKED,); ret (n, 3)."""
+    if _metadata_answered(frame) or _load(frame, _STAGE, nb.int32) != _EXECUTE:
         return 0
     args, rets = _load(frame, _ARGS, nb.int64), _load(frame, _RETS, nb.int64)
-    x_data, x_dims = _buffer(args, 0)
-    valid_data, valid_dims = _buffer(args, 1)
-    packed_data, _ = _buffer(args, 2)
-    out_data, _ = _buffer(rets, 0)
-    total = _load(x_dims, 8, nb.int64)
-    n, k = _load(valid_dims, 0, nb.int64), _load(valid_dims, 8, nb.int64)
-    x = nb.carray(_pointer(x_data), (CHANNELS, total), np.float32)
-    valid = nb.carray(_pointer(valid_data), (n, k), np.float32)
-    packed = nb.carray(_pointer(packed_data), (PACKED,), np.float32)
-    out = nb.carray(_pointer(out_data), (total,), np.float32)
-    logits_kernel(x, valid, packed, out)
+    _, rows_dims = _buffer(args, 0)
+    _, index_dims = _buffer(args, 1)
+    n_rows = _load(rows_dims, 0, nb.int64)
+    n, k = _load(index_dims, 0, nb.int64), _load(index_dims, 8, nb.int64)
+    f32 = np.float32
+    radiance_kernel(
+        _array(args, 0, (n_rows, ROW), f32), _array(args, 1, (n, k), np.int32),
+        _array(args, 2, (n, 3), f32), _array(args, 3, (n, 3), f32),
+        _array(args, 4, (n, 3), f32), _array(args, 5, (n, 3), f32),
+        _array(args, 6, (n,), f32), _array(args, 7, (n,), f32), _array(args, 8, (n,), f32),
+        _array(args, 9, (PACKED,), f32), _array(rets, 0, (n, 3), f32),
+    )  # fmt: skip
     return 0
 
 
-_registered = False
+_registered = False  # the handler compiled and registered in this process
 
 
 def _register() -> None:
-    """Register the handler with XLA's CPU platform (once per process)."""
+    """Compile the handler (or load it from Numba's cache) and register it with XLA's CPU
+    platform, once per process: on first use, so importing costs no compilation."""
     global _registered
     if not _registered:
-        address = ctypes.c_void_p(_handler.address)
+        handler = nb.cfunc(types.int64(types.int64), cache=True)(_handler)
+        address = ctypes.c_void_p(handler.address)
         jax.ffi.register_ffi_target(TARGET, jax.ffi.pycapsule(address), platform="cpu")
         _registered = True
 
@@ -421,15 +515,14 @@ def available() -> bool:
     return jax.default_backend() == "cpu"
 
 
-def fused_logits(packed: jnp.ndarray, x: jnp.ndarray, valid: jnp.ndarray) -> jnp.ndarray:
-    """(n, k) KernelNet logits (before softplus) from packed params (PACKED,), features
-    x (CHANNELS, n, k) and valid (n, k) bool, by the fused kernel (CPU only)."""
-    if packed.shape != (PACKED,) or x.shape[0] != CHANNELS:
+def fused_radiance(packed: jnp.ndarray, rows: jnp.ndarray, q) -> jnp.ndarray:
+    """(B, 3) radiance of a `infer.Query` q of B points from the photons' rows (P + 1, ROW)
+    float32 of an `infer.PhotonTable` and packed params (PACKED,), by the fused kernel (CPU
+    only): what `infer.query_radiance` computes, in one call."""
+    if packed.shape != (PACKED,) or rows.shape[1] != ROW:
         raise ValueError(f"the fused kernel runs {CHANNELS} channels and width {WIDTH} only")
     _register()
-    channels, n, k = x.shape
     call = jax.ffi.ffi_call(
-        TARGET, jax.ShapeDtypeStruct((n * k,), jnp.float32), vmap_method="sequential"
+        TARGET, jax.ShapeDtypeStruct((len(q.radius), 3), jnp.float32), vmap_method="sequential"
     )
-    flat = x.reshape(channels, n * k).astype(jnp.float32)
-    return call(flat, valid.astype(jnp.float32), packed).reshape(n, k)
+    return call(rows, q.index.astype(jnp.int32), *q[1:], packed)

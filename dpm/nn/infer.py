@@ -9,7 +9,9 @@ so gathering the (B, K, 3) photon arrays happens inside the jitted function;
 each gathered block in two halves at once. The KernelNet is evaluated as flat matmuls over all the
 chunk's photons, feature-major: activations (width, B·K), so each layer is a (width × width)
 by (width × B·K) product, which XLA's dots run faster than the transposed thin (B·K × width)
-one (`kernel_head`). Both equal the per-point Flax `apply` within float rounding (tested).
+one (`kernel_head`). On the CPU, rendering with the shipped architecture runs a step's whole
+estimate as one fused kernel instead (`dpm.nn.fused`, called from inside the jitted function).
+All equal the per-point Flax `apply` within float rounding (tested).
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ from dpm.nn.features import (
     kernel_estimate,
     local_frame,
 )
-from dpm.nn.fused import available, fused_logits, pack_params, supports
+from dpm.nn.fused import available, fused_radiance, pack_params, supports
 from dpm.nn.model import SHIFT, KernelNet
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap
@@ -94,15 +96,11 @@ def kernel_head(
     flux: jnp.ndarray,
     albedo: jnp.ndarray,
     radius: jnp.ndarray,
-    fused: bool = False,
 ) -> jnp.ndarray:
     """(B, 3) radiance of B points from the network inputs x (9, B, K) of their K photons
     (valid (B, K), stored flux (B, K, 3), albedo (B, 3), bandwidth (B,)): KernelNet's logits
-    (`kernel_logits`, or with `fused` the fused CPU kernel of `dpm.nn.fused`), then Eq. 2."""
-    if fused:
-        z = fused_logits(pack_params(p), x, valid)
-    else:
-        z = kernel_logits(p, x, valid)
+    (`kernel_logits`), then Eq. 2."""
+    z = kernel_logits(p, x, valid)
     weight = jnp.where(valid, jax.nn.softplus(z + SHIFT), 0.0)
     return jax.vmap(kernel_estimate)(weight, flux, valid, albedo, radius)
 
@@ -213,7 +211,11 @@ def read_photons(table: PhotonTable, q: Query) -> tuple[jnp.ndarray, ...]:
 def query_radiance(params: dict, table: PhotonTable, q: Query) -> jnp.ndarray:
     """(B, 3) radiance of q's B points by KernelNet's params: `kernel_radiance` of their
     `gathered_batch`, with the features formed as (9, B, K) straight from the photons' rows
-    (the flux feature comes precomputed with the row); equal within float rounding (tested)."""
+    (the flux feature comes precomputed with the row), or where `use_fused` the fused kernel's
+    `fused_radiance`; equal within float rounding (tested)."""
+    p = params["params"]
+    if use_fused(p):
+        return fused_radiance(pack_params(p), table.rows, q)
     photon, offset, valid = read_photons(table, q)
     column = jnp.moveaxis(photon, 2, 0)  # (16, B, K): one channel a row
     offset = jnp.moveaxis(offset, 2, 0)
@@ -229,9 +231,7 @@ def query_radiance(params: dict, table: PhotonTable, q: Query) -> jnp.ndarray:
     x = jnp.concatenate(
         [in_frame(offset) * inv_r[:, None], in_frame(column[DIRECTION]), column[FLUX_FEATURE]]
     )
-    p = params["params"]
-    fused = use_fused(p)
-    return kernel_head(p, x, valid, photon[..., FLUX], q.albedo, q.radius, fused)
+    return kernel_head(p, x, valid, photon[..., FLUX], q.albedo, q.radius)
 
 
 def use_fused(p: dict) -> bool:
