@@ -87,9 +87,24 @@ def pack_params(p: dict) -> jnp.ndarray:
     return jnp.concatenate(parts)
 
 
-def _block_codegen(n_in: int, relu: bool, head: bool):
+def _splat(builder, value):
+    """IR: a LANES-float vector with every lane `value`."""
+    i32 = ir.IntType(32)
+    v = builder.insert_element(
+        ir.Constant(ir.VectorType(value.type, LANES), ir.Undefined), value, ir.Constant(i32, 0)
+    )
+    return builder.shuffle_vector(v, v, ir.Constant(ir.VectorType(i32, LANES), [0] * LANES))
+
+
+def _vector_at(builder, data, at):
+    """IR: a pointer to the LANES floats at element `at` of float pointer `data`."""
+    vf = ir.VectorType(ir.FloatType(), LANES)
+    return builder.bitcast(builder.gep(data, [at]), vf.as_pointer())
+
+
+def _block_codegen(n_in: int, head: bool):
     """LLVM IR of one micro-kernel block: for photons p < PHOTONS, output row
-    y[y0 + p, :] = (ReLU of) init[owner[o0 + p], :] + Σ_i x[x0 + p·xp + i·xi] · w[i, :], float32,
+    y[y0 + p, :] = ReLU(init[owner[o0 + p], :] + Σ_i x[x0 + p·xp + i·xi] · w[i, :]), float32,
     with fused multiply-adds. Photon-major rows of WIDTH floats; x has any strides. With
     `head`, y is 1-D and gets y[y0 + p] = row · head (the last argument, WIDTH floats) instead,
     summed as a fixed pairwise tree."""
@@ -108,11 +123,7 @@ def _block_codegen(n_in: int, relu: bool, head: bool):
             return ir.Constant(i64, v)
 
         def vector(data, at):
-            return builder.bitcast(builder.gep(data, [at]), vf.as_pointer())
-
-        def splat(s):
-            v = builder.insert_element(ir.Constant(vf, ir.Undefined), s, ir.Constant(i32, 0))
-            return builder.shuffle_vector(v, v, ir.Constant(ir.VectorType(i32, LANES), [0] * LANES))
+            return _vector_at(builder, data, at)
 
         acc = []
         for p in range(PHOTONS):
@@ -132,14 +143,15 @@ def _block_codegen(n_in: int, relu: bool, head: bool):
             ]
             feature = builder.mul(xi, const(i))
             for p in range(PHOTONS):
-                xs = splat(builder.load(builder.gep(x.data, [builder.add(photon[p], feature)])))
+                xs = _splat(
+                    builder, builder.load(builder.gep(x.data, [builder.add(photon[p], feature)]))
+                )
                 for v in range(VECTORS):
                     product = builder.fmul(xs, ws[v], flags=["contract"])
                     acc[p][v] = builder.fadd(product, acc[p][v], flags=["contract"])
         zero = ir.Constant(vf, [0.0] * LANES)
-        if relu:
-            acc = [[builder.select(builder.fcmp_ordered(">", a, zero), a, zero) for a in row]
-                   for row in acc]  # fmt: skip
+        acc = [[builder.select(builder.fcmp_ordered(">", a, zero), a, zero) for a in row]
+               for row in acc]  # fmt: skip
         if head:
             last = context.make_array(sig.args[10])(context, builder, args[10])
             hs = [
@@ -177,12 +189,12 @@ def _make_block(n_in: int, head: bool = False):
 
         def block(typingctx, w, init, owner, x, y, o0, x0, xp, xi, y0, last):
             sig = types.void(w, init, owner, x, y, o0, x0, xp, xi, y0, last)
-            return sig, _block_codegen(n_in, True, True)
+            return sig, _block_codegen(n_in, True)
     else:
 
         def block(typingctx, w, init, owner, x, y, o0, x0, xp, xi, y0):
             sig = types.void(w, init, owner, x, y, o0, x0, xp, xi, y0)
-            return sig, _block_codegen(n_in, True, False)
+            return sig, _block_codegen(n_in, False)
 
     block.__name__ = f"_block_{n_in}{'_head' if head else ''}"
     return intrinsic(block)
@@ -195,7 +207,7 @@ _head_block = _make_block(WIDTH, head=True)
 
 def _pool_codegen(context, builder, sig, args):
     """LLVM IR of `_pool`: one pass over a point's k photon rows, max and sum in registers."""
-    f32, i32, i64 = ir.FloatType(), ir.IntType(32), ir.IntType(64)
+    f32, i64 = ir.FloatType(), ir.IntType(64)
     vf = ir.VectorType(f32, LANES)
     features, valid, pooled = (context.make_array(sig.args[i])(context, builder, args[i])
                                for i in (0, 1, 3))  # fmt: skip
@@ -208,14 +220,13 @@ def _pool_codegen(context, builder, sig, args):
     count = cgutils.alloca_once_value(builder, ir.Constant(f32, 0.0))
 
     def vector(data, at):
-        return builder.bitcast(builder.gep(data, [at]), vf.as_pointer())
+        return _vector_at(builder, data, at)
 
     with cgutils.for_range(builder, k, intp=i64) as loop:
         photon = builder.add(first, loop.index)
         m = builder.load(builder.gep(valid.data, [photon]))
         builder.store(builder.fadd(builder.load(count), m), count)
-        ms = builder.insert_element(ir.Constant(vf, ir.Undefined), m, ir.Constant(i32, 0))
-        ms = builder.shuffle_vector(ms, ms, ir.Constant(ir.VectorType(i32, LANES), [0] * LANES))
+        ms = _splat(builder, m)
         row = builder.mul(photon, ir.Constant(i64, WIDTH))
         for v in range(VECTORS):
             at = builder.add(row, ir.Constant(i64, v * LANES))
@@ -227,8 +238,7 @@ def _pool_codegen(context, builder, sig, args):
     n = builder.select(
         builder.fcmp_ordered(">", n, ir.Constant(f32, 1.0)), n, ir.Constant(f32, 1.0)
     )
-    ns = builder.insert_element(ir.Constant(vf, ir.Undefined), n, ir.Constant(i32, 0))
-    ns = builder.shuffle_vector(ns, ns, ir.Constant(ir.VectorType(i32, LANES), [0] * LANES))
+    ns = _splat(builder, n)
     for v in range(VECTORS):
         builder.store(
             builder.load(biggest[v]), vector(pooled.data, ir.Constant(i64, v * LANES)), align=4
