@@ -21,6 +21,7 @@ reads the buffers from the call frame.
 from __future__ import annotations
 
 import ctypes
+import threading
 
 import jax
 import jax.numpy as jnp
@@ -59,7 +60,10 @@ LAYOUT = (
     (("Dense_2", "bias"), (1,)),
 )
 _STARTS = tuple(int(s) for s in np.cumsum([0] + [np.prod(shape) for _, shape in LAYOUT]))
-PACKED = _STARTS[-1]  # floats of the packed parameters
+# The constants the estimate shares with the XLA path ride at the end of the packed params, so
+# the kernel reads their current values (Numba's cache would keep the values it compiled).
+_SHIFT, _NORMAL_COS, _MIN_RADIUS = range(_STARTS[-1], _STARTS[-1] + 3)
+PACKED = _STARTS[-1] + 3  # floats of the packed parameters and constants
 
 
 def supports(p: dict) -> bool:
@@ -77,13 +81,15 @@ def supports(p: dict) -> bool:
 
 
 def pack_params(p: dict) -> jnp.ndarray:
-    """(PACKED,) float32: KernelNet params p (the "params" tree) flattened in LAYOUT's order."""
+    """(PACKED,) float32: KernelNet params p (the "params" tree) flattened in LAYOUT's order,
+    then SHIFT, NORMAL_COS and MIN_RADIUS."""
     parts = []
     for path, _ in LAYOUT:
         leaf = p
         for name in path:
             leaf = leaf[name]
         parts.append(jnp.ravel(jnp.asarray(leaf, jnp.float32)))
+    parts.append(jnp.array([SHIFT, NORMAL_COS, MIN_RADIUS], jnp.float32))
     return jnp.concatenate(parts)
 
 
@@ -338,13 +344,16 @@ def logits_kernel(x, valid, packed, out):
 
 
 @nb.njit(cache=True, error_model="numpy")
-def radiance_kernel(rows, index, hi, lo, normal, albedo, radius, angle, n_paths, packed, out):
+def radiance_kernel(rows, index, hi, lo, normal, albedo, radius, angle, packed, out):
     """(n, 3) radiance out of n points from their K nearest photons, as `infer.query_radiance`
     computes it: the photons' rows (P + 1, 16) of an `infer.PhotonTable` read by index (n, K)
     (P: missing), the points' float32 position split hi + lo (n, 3), unit normals, albedos
-    (n, 3), bandwidths, frame angles (NaN: canonical) and N (n,), and packed params."""
+    (n, 3), bandwidths and frame angles (n,; NaN: canonical), and `pack_params`' array."""
     n, k = index.shape
     last = rows.shape[0] - 1  # the zero row of a missing neighbour
+    shift, agree_cos = packed[_SHIFT], packed[_NORMAL_COS]
+    min_radius = packed[_MIN_RADIUS]
+    out[:] = 0.0
     x = np.empty((CHANNELS, n * k), np.float32)
     valid = np.empty((n, k), np.float32)
     for point in range(n):
@@ -352,13 +361,13 @@ def radiance_kernel(rows, index, hi, lo, normal, albedo, radius, angle, n_paths,
         nx, ny, nz = normal[point, 0], normal[point, 1], normal[point, 2]
         cx, cy, cz = np.float32(0.0), np.float32(0.0), np.float32(0.0)
         for j in range(k):
-            i = index[point, j]
+            i = min(index[point, j], last)
             ox = (rows[i, 0] - hi[point, 0]) - lo[point, 0]
             oy = (rows[i, 1] - hi[point, 1]) - lo[point, 1]
             oz = (rows[i, 2] - hi[point, 2]) - lo[point, 2]
             if i >= last:
                 ox, oy, oz = np.float32(0.0), np.float32(0.0), np.float32(0.0)
-            agree = rows[i, 9] * nx + rows[i, 10] * ny + rows[i, 11] * nz >= NORMAL_COS
+            agree = rows[i, 9] * nx + rows[i, 10] * ny + rows[i, 11] * nz >= agree_cos
             valid[point, j] = 1.0 if agree else 0.0
             if agree:
                 cx, cy, cz = cx + ox, cy + oy, cz + oz
@@ -370,9 +379,9 @@ def radiance_kernel(rows, index, hi, lo, normal, albedo, radius, angle, n_paths,
         c, si = np.cos(turn), np.sin(turn)
         f0 = (c * t[0] + si * s[0], c * t[1] + si * s[1], c * t[2] + si * s[2])
         f1 = (-si * t[0] + c * s[0], -si * t[1] + c * s[1], -si * t[2] + c * s[2])
-        inv_r = np.float32(1.0) / max(radius[point], np.float32(MIN_RADIUS))
+        inv_r = np.float32(1.0) / max(radius[point], min_radius)
         for j in range(k):
-            col, i = first + j, index[point, j]
+            col, i = first + j, min(index[point, j], last)
             ox, oy, oz = x[0, col], x[1, col], x[2, col]
             dx, dy, dz = rows[i, 3], rows[i, 4], rows[i, 5]
             x[0, col] = (f0[0] * ox + f0[1] * oy + f0[2] * oz) * inv_r
@@ -388,12 +397,12 @@ def radiance_kernel(rows, index, hi, lo, normal, albedo, radius, angle, n_paths,
         total = np.zeros(3, np.float32)
         for j in range(k):
             if valid[point, j] > 0:
-                u = z[point * k + j] + np.float32(SHIFT)
+                u = z[point * k + j] + shift
                 w = max(u, np.float32(0.0)) + np.log1p(np.exp(-abs(u)))
-                i = index[point, j]
+                i = min(index[point, j], last)
                 for ch in range(3):
                     total[ch] += w * rows[i, 6 + ch]
-        r = max(radius[point], np.float32(MIN_RADIUS))
+        r = max(radius[point], min_radius)
         for ch in range(3):
             out[point, ch] = albedo[point, ch] / np.pi * total[ch] / (np.pi * r * r)
 
@@ -415,7 +424,8 @@ _EXTENSION, _STAGE, _ARGS, _RETS = 8, 32, 72, 112  # call frame: extension_start
 _EXT_TYPE, _EXT_METADATA = 8, 24  # extension base: type; metadata extension: metadata pointer
 _META_VERSION, _META_TRAITS = 8, 32  # metadata: api_version struct, traits
 _BUFFER_DATA, _BUFFER_DIMS = 24, 40  # buffer: data, dims
-_API_MAJOR, _API_MINOR = 0, 1  # the FFI version whose structs these offsets follow
+_API_MAJOR, _API_MINOR = 0, 1  # the FFI version reported: these structs are unchanged since
+# 0.1 (offsets checked against jaxlib 0.10's header, API 0.3); XLA accepts older handlers
 _METADATA_KIND, _EXECUTE = 1, 3
 
 
@@ -487,7 +497,7 @@ def _array(list_address, i, shape, dtype):
 
 def _handler(frame):
     """XLA FFI handler of `fused_radiance`: args rows (P + 1, 16), index (n, K), hi, lo,
-    normal, albedo (n, 3), radius, angle, n_paths (n,), packed (PACKED,); ret (n, 3)."""
+    normal, albedo (n, 3), radius, angle (n,), packed (PACKED,); ret (n, 3)."""
     if _metadata_answered(frame) or _load(frame, _STAGE, nb.int32) != _EXECUTE:
         return 0
     args, rets = _load(frame, _ARGS, nb.int64), _load(frame, _RETS, nb.int64)
@@ -500,24 +510,26 @@ def _handler(frame):
         _array(args, 0, (n_rows, ROW), f32), _array(args, 1, (n, k), np.int32),
         _array(args, 2, (n, 3), f32), _array(args, 3, (n, 3), f32),
         _array(args, 4, (n, 3), f32), _array(args, 5, (n, 3), f32),
-        _array(args, 6, (n,), f32), _array(args, 7, (n,), f32), _array(args, 8, (n,), f32),
-        _array(args, 9, (PACKED,), f32), _array(rets, 0, (n, 3), f32),
+        _array(args, 6, (n,), f32), _array(args, 7, (n,), f32),
+        _array(args, 8, (PACKED,), f32), _array(rets, 0, (n, 3), f32),
     )  # fmt: skip
     return 0
 
 
-_registered = False  # the handler compiled and registered in this process
+_handler_cfunc = None  # the compiled handler, kept alive for XLA once registered
+_registering = threading.Lock()  # two threads may trace their first call at once
 
 
 def _register() -> None:
     """Compile the handler (or load it from Numba's cache) and register it with XLA's CPU
     platform, once per process: on first use, so importing costs no compilation."""
-    global _registered
-    if not _registered:
-        handler = nb.cfunc(types.int64(types.int64), cache=True)(_handler)
-        address = ctypes.c_void_p(handler.address)
-        jax.ffi.register_ffi_target(TARGET, jax.ffi.pycapsule(address), platform="cpu")
-        _registered = True
+    global _handler_cfunc
+    with _registering:
+        if _handler_cfunc is None:
+            handler = nb.cfunc(types.int64(types.int64), cache=True)(_handler)
+            address = ctypes.c_void_p(handler.address)
+            jax.ffi.register_ffi_target(TARGET, jax.ffi.pycapsule(address), platform="cpu")
+            _handler_cfunc = handler
 
 
 def available() -> bool:
@@ -527,12 +539,17 @@ def available() -> bool:
 
 def fused_radiance(packed: jnp.ndarray, rows: jnp.ndarray, q) -> jnp.ndarray:
     """(B, 3) radiance of a `infer.Query` q of B points from the photons' rows (P + 1, ROW)
-    float32 of an `infer.PhotonTable` and packed params (PACKED,), by the fused kernel (CPU
-    only): what `infer.query_radiance` computes, in one call."""
-    if packed.shape != (PACKED,) or rows.shape[1] != ROW:
+    float32 of an `infer.PhotonTable` and `pack_params`' array (PACKED,), by the fused kernel
+    (CPU only): what `infer.query_radiance` computes, in one call (arrays cast to float32)."""
+    if packed.shape != (PACKED,):
         raise ValueError(f"the fused kernel runs {CHANNELS} channels and width {WIDTH} only")
+    if rows.shape[1] != ROW:
+        raise ValueError(f"photon rows must hold {ROW} floats, not {rows.shape[1]}")
     _register()
     call = jax.ffi.ffi_call(
         TARGET, jax.ShapeDtypeStruct((len(q.radius), 3), jnp.float32), vmap_method="sequential"
     )
-    return call(rows, q.index.astype(jnp.int32), *q[1:], packed)
+    f32 = jnp.float32
+    points = [jnp.asarray(a, f32) for a in (q.position_hi, q.position_lo, q.normal, q.albedo,
+              q.radius, q.angle)]  # fmt: skip
+    return call(jnp.asarray(rows, f32), jnp.asarray(q.index, jnp.int32), *points, packed)

@@ -9,7 +9,7 @@ so gathering the (B, K, 3) photon arrays happens inside the jitted function;
 each gathered block in two halves at once. The KernelNet is evaluated as flat matmuls over all the
 chunk's photons, feature-major: activations (width, B·K), so each layer is a (width × width)
 by (width × B·K) product, which XLA's dots run faster than the transposed thin (B·K × width)
-one (`kernel_head`). On the CPU, rendering with the shipped architecture runs a step's whole
+one (`kernel_logits`). On the CPU, rendering with the shipped architecture runs a step's whole
 estimate as one fused kernel instead (`dpm.nn.fused`, called from inside the jitted function).
 All equal the per-point Flax `apply` within float rounding (tested).
 """
@@ -332,7 +332,7 @@ def predict_points(
     caller times the rest). Each gathered block is split in BLOCKS_IN_FLIGHT parts that the
     network runs at once, on worker threads, while the next block is gathered, so the "gather"
     stage also holds the network's time that the gather could not hide. The split is fixed,
-    not taken from the machine's thread count, so the output is the same on any machine."""
+    not taken from the machine's thread count, so the output does not depend on it."""
     index = photon_index(photons, watch)
     p = index.photons
     table = photon_table(p)
