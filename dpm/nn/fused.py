@@ -34,6 +34,7 @@ from numba.extending import intrinsic
 from dpm.nn.features import MIN_RADIUS
 from dpm.nn.model import SHIFT
 from dpm.tracer.photon_grid import NORMAL_COS
+from dpm.tracer.sampling import orthonormal_basis
 
 CHANNELS = 9  # input features per photon
 WIDTH = 32  # channels of every hidden layer
@@ -66,29 +67,25 @@ _SHIFT, _NORMAL_COS, _MIN_RADIUS = range(_STARTS[-1], _STARTS[-1] + 3)
 PACKED = _STARTS[-1] + 3  # floats of the packed parameters and constants
 
 
+def _leaf(p: dict, path: tuple[str, ...]):
+    """The array at `path` of a params tree."""
+    for name in path:
+        p = p[name]
+    return p
+
+
 def supports(p: dict) -> bool:
     """Whether KernelNet params p (the "params" tree) have the shapes this kernel runs."""
     try:
-        for path, shape in LAYOUT:
-            leaf = p
-            for name in path:
-                leaf = leaf[name]
-            if tuple(leaf.shape) != shape:
-                return False
+        return all(tuple(_leaf(p, path).shape) == shape for path, shape in LAYOUT)
     except (KeyError, TypeError):
         return False
-    return True
 
 
 def pack_params(p: dict) -> jnp.ndarray:
     """(PACKED,) float32: KernelNet params p (the "params" tree) flattened in LAYOUT's order,
     then SHIFT, NORMAL_COS and MIN_RADIUS."""
-    parts = []
-    for path, _ in LAYOUT:
-        leaf = p
-        for name in path:
-            leaf = leaf[name]
-        parts.append(jnp.ravel(jnp.asarray(leaf, jnp.float32)))
+    parts = [jnp.ravel(jnp.asarray(_leaf(p, path), jnp.float32)) for path, _ in LAYOUT]
     parts.append(jnp.array([SHIFT, NORMAL_COS, MIN_RADIUS], jnp.float32))
     return jnp.concatenate(parts)
 
@@ -372,7 +369,8 @@ def radiance_kernel(rows, index, hi, lo, normal, albedo, radius, angle, packed, 
             if agree:
                 cx, cy, cz = cx + ox, cy + oy, cz + oz
             x[0, first + j], x[1, first + j], x[2, first + j] = ox, oy, oz
-        t, s = _tangents(nx, ny, nz)
+        tx, ty, tz, sx, sy, sz = orthonormal_basis(nx, ny, nz)  # `local_frame` at angle 0
+        t, s = (tx, ty, tz), (sx, sy, sz)
         turn = angle[point]
         if np.isnan(turn):  # the canonical angle: the first tangent towards the mean offset
             turn = np.arctan2(cx * s[0] + cy * s[1] + cz * s[2], cx * t[0] + cy * t[1] + cz * t[2])
@@ -405,17 +403,6 @@ def radiance_kernel(rows, index, hi, lo, normal, albedo, radius, angle, packed, 
         r = max(radius[point], min_radius)
         for ch in range(3):
             out[point, ch] = albedo[point, ch] / np.pi * total[ch] / (np.pi * r * r)
-
-
-@nb.njit(cache=True, inline="always")
-def _tangents(nx, ny, nz):
-    """The tangents t, s of `features.local_frame` at angle 0 for the unit normal (Duff et al.)."""
-    sign = np.float32(1.0) if nz >= 0 else np.float32(-1.0)
-    a = np.float32(-1.0) / (sign + nz)
-    b = nx * ny * a
-    t = (np.float32(1.0) + sign * nx * nx * a, sign * b, -sign * nx)
-    s = (b, sign + ny * ny * a, -ny)
-    return t, s
 
 
 # --- the XLA FFI handler: raw call-frame access (offsets of c_api.h's structs on 64-bit) ---
