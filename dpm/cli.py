@@ -107,7 +107,7 @@ def _render_parser() -> _Parser:
 
 
 STAGES = {  # the summary's stages: name -> the render's timing keys
-    "load": ("load", "bvh"),
+    "load": ("load", "bvh", "kernels"),
     "trace": ("photons",),
     "gather": ("gather",),
     "estimate": ("estimate",),
@@ -153,6 +153,16 @@ def render_options(args: argparse.Namespace, sidecar: dict) -> RenderOptions:
     return options
 
 
+def warn_overrun(stats: dict, budget: float | None) -> None:
+    """One line on stderr when the first pass alone overran the --time budget (the image is
+    then that one pass, and the render took longer than asked)."""
+    if stats.get("overran"):
+        print(f"dpm-render: warning: the first pass took {stats['pass_seconds']:.2f} s and the"
+              f" budget was {budget:g} s (counted from the process start: "
+              f"{stats['setup_seconds']:.2f} s had gone before the first pass): the image is one"
+              " pass", file=sys.stderr)  # fmt: skip
+
+
 def check_writable(path: Path) -> None:
     """Raise InputError unless a file can be written at `path` (checked before rendering, so
     that a bad output path never costs a render)."""
@@ -193,6 +203,7 @@ def render_main(argv: Sequence[str] | None = None) -> int:
             for output in outputs:
                 write_image(output, result.image)
         seconds["write"] = watch.get("write")
+        warn_overrun(result.stats, options.time)  # a warning: even with --quiet
         result.stats["scene"] = str(args.scene)
         result.stats["output"] = [str(o) for o in outputs]
         if args.stats is not None:

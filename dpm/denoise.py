@@ -40,7 +40,7 @@ def restore_certain(
     z standard errors `error` (H, W) of the pixel's own mean: there the render's `color`
     (blended in between z and 2z). The denoiser takes a glint that every path of a pixel
     sees (a small light in water) for a firefly and wipes it; a pixel that well known needs
-    no denoising."""
+    no denoising. An infinite error (unknown: too few samples to tell) keeps `denoised`."""
     shift = np.abs(luminance(denoised) - luminance(color)) / np.maximum(error, 1e-30)
     keep = np.clip(shift / z - 1.0, 0.0, 1.0)[..., None]
     return (denoised + keep * (color - denoised)).astype(np.float32)

@@ -117,19 +117,35 @@ class Halves:
     def standard_error(self) -> np.ndarray:
         """(P,) float64 standard error of each pixel's luminance, from its halves' paths, or
         its SMOOTH × SMOOTH neighbourhood's mean squared error where that is larger (a pixel
-        whose rare paths have not shown up yet knows no variance of its own)."""
+        whose rare paths have not shown up yet knows no variance of its own); inf where it
+        cannot be told (`_variance`): such a pixel is not known exactly, its error is unknown."""
         return np.sqrt(self._or_neighbourhood(self._variance()))
 
     def noise(self) -> float:
-        """Expected RMSE of the pixels' luminance, from each half's deviations and paths."""
+        """Expected RMSE of the pixels' luminance, from each half's deviations and paths (inf
+        while some pixel's error cannot be told)."""
         return float(np.sqrt(np.mean(self._variance())))
 
     def _variance(self) -> np.ndarray:
-        """(P,) float64 variance of each pixel's luminance (the mean of its halves' means)."""
-        var = [p.deviation() ** 2 / np.maximum(p.count, 1) for p in map(self.half, (0, 1))]
-        return (var[0] + var[1]) / 4
+        """(P,) float64 variance of each pixel's luminance as `mean` takes it (the mean of its
+        halves' means, or the one half's mean where the other has no paths); inf where a half
+        it takes has fewer than 2 paths, or neither has any: one path's spread reads 0, which
+        would pass a first pass's noise for exact."""
+        a, b = self.half(0), self.half(1)
+        var_a, var_b = (p.deviation() ** 2 / np.maximum(p.count, 1) for p in (a, b))
+        both = (a.count > 0) & (b.count > 0)
+        var = np.where(both, (var_a + var_b) / 4, var_a + var_b)  # an empty half's var is 0
+        unknown = (a.count == 1) | (b.count == 1) | ((a.count == 0) & (b.count == 0))
+        return np.where(unknown, np.inf, var)
 
     def _or_neighbourhood(self, var: np.ndarray) -> np.ndarray:
-        """(P,) per-pixel values var (P,), or their SMOOTH × SMOOTH mean where that is larger."""
-        near = uniform_filter(var.reshape(self.height, self.width), SMOOTH, mode="nearest")
+        """(P,) per-pixel values var (P,), or the SMOOTH × SMOOTH mean of the finite ones where
+        that is larger (an infinite value, unknown, stays so and is left out of its
+        neighbours' means)."""
+        known = np.isfinite(var)
+        shape = (self.height, self.width)
+        total = uniform_filter(np.where(known, var, 0.0).reshape(shape), SMOOTH, mode="nearest")
+        share = uniform_filter(known.reshape(shape).astype(np.float64), SMOOTH, mode="nearest")
+        some = share > 0.5 / SMOOTH**2  # at least one finite value (sums round off, not to 0)
+        near = np.where(some, total / np.where(some, share, 1.0), 0.0)
         return np.maximum(var, near.ravel())

@@ -11,7 +11,9 @@ probabilistic PPM (Knaus & Zwicker 2011), so that estimate is consistent too. Af
 passes, each pass also spends extra camera paths where pixels vary most (adaptive sampling,
 `dpm.methods.adaptive`, cross-fitted so the image stays unbiased).
 `--time` renders passes until the budget (counted from the process start) would be overrun;
-without it `--spp` passes are rendered with `--photons` paths in all.
+without it `--spp` passes are rendered with `--photons` paths in all. The kernels that only
+later passes of the plan call are compiled (or loaded from Numba's cache) in the first pass
+(`warm_later_kernels`), so no later pass of a budgeted render stops to compile.
 
 The plan is made after the first pass, from what it found (deterministic: same seed, same
 plan): no photons where the scene has no mirror or glass, or where the first pass's photons
@@ -62,7 +64,7 @@ from dpm.tracer import (
     trace_pixels,
     trace_visible_points,
 )
-from dpm.tracer.photon_grid import photon_grid
+from dpm.tracer.photon_grid import PhotonGrid, photon_grid
 
 RADIUS_FOOTPRINTS = 2.0  # initial radius per pixel, in pixel footprints at its first point
 PHOTONS_PER_PIXEL = 4.0  # photon paths per pass per pixel when the plan keeps caustics (tuned:
@@ -143,6 +145,27 @@ def footprint_radius(points: VisiblePoints, camera: Camera) -> np.ndarray:
     seen = points.hit & (radius > 0)
     fill = np.median(radius[seen]) if seen.any() else 1.0
     return np.where(seen, radius, fill)
+
+
+def warm_later_kernels(
+    scene: Scene,
+    bvh: BVH,
+    camera: Camera,
+    points: VisiblePoints | None,
+    grid: PhotonGrid | None,
+    adapt: bool,
+) -> None:
+    """Compile (or load from Numba's cache), on no samples and with the types later passes of
+    the plan pass, the kernels that only they call: shading without a photon grid (grid None,
+    after a first pass's `points`: the plan left caustics out) and, with `adapt`, adaptive
+    sampling's paths (from pass ADAPT_AFTER; points None: whole pixels, the light seen
+    included). A pass that first reached them would stop to compile (minutes), past any budget
+    and after shorter renders had cached everything else."""
+    if points is not None and grid is None:
+        shade(scene, bvh, points.select(np.zeros(len(points), bool)), 0, False, None)
+    if adapt:
+        none = np.zeros(1, np.int64)  # one pixel given no paths: the kernel runs no task
+        trace_listed(scene, bvh, camera, none, none, 0, grid, points is None)
 
 
 def sharper_where_biased(
@@ -246,6 +269,7 @@ class Auto(Method):
         bar = tqdm(total=total, unit="pass", disable=not o.progress, desc=self.name)
         j = last = 0
         begun = time.monotonic()
+        self.setup_seconds = begun - started  # of the budget, gone before the first pass
         while True:
             seed = pass_seed(o.seed, j)
             if full and plan is not None and plan.caustics == "off" and not separate:
@@ -305,11 +329,21 @@ class Auto(Method):
                 path_light = float((paths.mean() + glow.mean()).mean(axis=1).sum()) if full else 0.0
                 caustic_light = float(state.irradiance().mean(axis=1).sum())
                 plan = make_plan(scene, pixels, path_light, caustic_light, given, why)
+            if j == 0 and full and (deadline is not None or o.spp > 1):
+                with watch("kernels"):
+                    warm_later_kernels(
+                        scene, bvh, camera, points if separate else None,
+                        grid if plan.caustics != "off" else None,
+                        deadline is not None or o.spp > ADAPT_AFTER,
+                    )  # fmt: skip
             j += 1
             grid_radius *= np.sqrt((j + ALPHA) / (j + 1))  # Knaus & Zwicker 2011, Eq. 17
             bar.update(1)
             now = time.monotonic()
             last, begun = now - begun, now  # a pass's time includes what runs between passes
+            if j == 1:  # could the budget hold one pass and the finishing?
+                self.pass_seconds = last
+                self.overran = deadline is not None and now + finish > deadline
             if deadline is None:
                 if j >= o.spp:
                     break
@@ -326,7 +360,8 @@ class Auto(Method):
         if not full:
             return caustic.reshape(h, w, 3), self.stats()
         seen, error = glow.mean(), glow.standard_error()
-        after = (error < SEEN_ERROR * luminance(seen))[:, None]  # known well enough as it is
+        # known well enough as it is (not where one sample per half tells no error: inf)
+        after = (error < SEEN_ERROR * luminance(seen))[:, None]
         image = (paths.mean() + np.where(after, 0, seen)).astype(np.float32).reshape(h, w, 3)
         if o.denoised:
             with watch("denoise"):
@@ -338,11 +373,14 @@ class Auto(Method):
 
     def stats(self) -> dict[str, Any]:
         """Passes, the plan, caustic photons, dropped samples, adaptive paths, the pixels
-        given extra samples of the light seen in mirrors and glass (and those samples), and
-        the pixels whose caustic is the narrow kernel's."""
+        given extra samples of the light seen in mirrors and glass (and those samples), the
+        pixels whose caustic is the narrow kernel's, the first pass's seconds (and those
+        before it), and whether the first pass alone overran the budget."""
         return {
             "passes": self.passes, "plan": self.plan.as_dict(), "spp": self.passes,
             "caustic_photons": self.caustic_photons, "nonfinite_samples": self.dropped,
             "extra_paths": self.extra_paths, "light_pixels": self.light_pixels,
             "light_samples": max(self.light_samples, 0), "sharp_pixels": self.sharp_pixels,
+            "pass_seconds": self.pass_seconds, "setup_seconds": self.setup_seconds,
+            "overran": self.overran,
         }  # fmt: skip
