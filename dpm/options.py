@@ -52,7 +52,8 @@ class RenderOptions:
     )  # fmt: skip
     radius: float | None = _option(
         None, "initial gather radius, scene units", scoped=True,
-        default_text="0.001 x the scene's bounding diagonal",
+        default_text="each point's own: the distance to its 8th nearest photon of the first pass,"
+        " at most 4 pixel widths; auto: 2 pixel widths",
     )  # fmt: skip
     time: float | None = _option(
         None, "render in passes until this many seconds of wall time (from the process start)",

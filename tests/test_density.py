@@ -122,7 +122,7 @@ def test_cppm_keeps_its_radius_where_the_density_is_flat(per_pass: int) -> None:
         assert rmse(cppm.estimate(points, photons), exact) < 0.8 * rmse(
             ppm.estimate(points, photons), exact
         )
-        flat, varying = cppm.start(len(points)), cppm.start(len(points))
+        flat, varying = cppm.start(len(points), cppm.radius), cppm.start(len(points), cppm.radius)
         for part in photons.split(per_pass):
             flat.add(index, part)
         for part in striped_photons(200_000, seed).split(per_pass):

@@ -26,7 +26,7 @@ import numpy as np
 
 from dpm.density.base import in_plane, tangent_frame
 from dpm.density.gather import PointIndex
-from dpm.density.ppm import PPMState, Progressive
+from dpm.density.ppm import PPMState, Progressive, Radius, start_radius
 from dpm.density.progressive import ALPHA
 from dpm.density.shaped import (
     MOMENTS,
@@ -75,10 +75,13 @@ class NPPMState(PPMState):
     weights: str = ""  # weight file of the network ('': the shipped one)
 
     @classmethod
-    def start(cls, n: int, radius: float, alpha: float = ALPHA, weights: str = "") -> NPPMState:
-        """A state of n points with initial radius `radius` and nothing gathered."""
+    def start(
+        cls, n: int, radius: float | np.ndarray, alpha: float = ALPHA, weights: str = ""
+    ) -> NPPMState:
+        """A state of n points with initial radius `radius` (one, or (n,) per point) and
+        nothing gathered."""
         return cls(
-            np.full(n, float(radius)), np.zeros(n), np.zeros((n, 3)), np.zeros((n, MOMENTS)),
+            start_radius(n, radius), np.zeros(n), np.zeros((n, 3)), np.zeros((n, MOMENTS)),
             weights, alpha=alpha,
         )  # fmt: skip
 
@@ -134,6 +137,6 @@ class NPPM(Progressive):
         super().check()
         predictor(self.weights)
 
-    def start(self, n: int) -> NPPMState:
-        """The state before the first pass, for n points."""
-        return NPPMState.start(n, self.radius, self.alpha, self.weights)
+    def start(self, n: int, radius: Radius) -> NPPMState:
+        """The state before the first pass, for n points with initial radius `radius`."""
+        return NPPMState.start(n, radius, self.alpha, self.weights)

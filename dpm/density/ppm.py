@@ -9,14 +9,19 @@ slices of one photon stream, so a run can stop after any pass and resume bit-ide
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
 from dpm.density.gather import Photons, PointIndex, Watch
 from dpm.density.progressive import ALPHA, Statistics, estimate_in_passes
+from dpm.density.radius import initial_radii
 from dpm.errors import InputError
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap, VisiblePoints
+
+Radius = float | np.ndarray  # one initial radius (scene units), or (n,) per point
+Footprint = np.ndarray | None  # (n,) pixel width at each point (scene units), or unknown
 
 
 def check_progressive(radius: float, photons_per_pass: int, alpha: float) -> None:
@@ -29,6 +34,11 @@ def check_progressive(radius: float, photons_per_pass: int, alpha: float) -> Non
         raise InputError(f"alpha must lie in (0, 1) (got {alpha})")
 
 
+def start_radius(n: int, radius: float | np.ndarray) -> np.ndarray:
+    """(n,) float64 initial radii from one radius or (n,) per point (a fresh copy)."""
+    return np.broadcast_to(np.asarray(radius, np.float64), (n,)).copy()
+
+
 @dataclass
 class PPMState(Statistics):
     """Per-point statistics of a PPM run over n points after `passes` passes."""
@@ -38,9 +48,10 @@ class PPMState(Statistics):
     tau: np.ndarray  # (n, 3) float64 accumulated flux τ, per emitted path (W)
 
     @classmethod
-    def start(cls, n: int, radius: float, alpha: float = ALPHA) -> PPMState:
-        """A state of n points with initial radius `radius` and nothing gathered."""
-        return cls(np.full(n, float(radius)), np.zeros(n), np.zeros((n, 3)), alpha=alpha)
+    def start(cls, n: int, radius: float | np.ndarray, alpha: float = ALPHA) -> PPMState:
+        """A state of n points with initial radius `radius` (one, or (n,) per point) and
+        nothing gathered."""
+        return cls(start_radius(n, radius), np.zeros(n), np.zeros((n, 3)), alpha=alpha)
 
     def add(self, index: PointIndex, photons: PhotonMap, watch: Stopwatch | None = None) -> None:
         """Gather one pass of photons (flux divided by its own n_paths) and shrink the radii."""
@@ -70,15 +81,27 @@ class PPMState(Statistics):
 @dataclass(frozen=True)
 class Progressive:
     """Parameters of a progressive estimator at fixed visible points: initial radius (scene
-    units), emitted photon paths per pass, α; subclasses say which statistics they keep."""
+    units; None: each point's own from the first pass, `dpm.density.radius`), emitted photon
+    paths per pass, α; subclasses say which statistics they keep (`start`)."""
 
-    radius: float = 0.01
+    radius: float | None = None
     photons_per_pass: int = 10_000
     alpha: float = ALPHA
+    # the default initial radius, in units of `initial_radii`'s (chosen on the examples)
+    scale: ClassVar[float] = 1.0
 
     def check(self) -> None:
         """Raise InputError for unusable parameters."""
-        check_progressive(self.radius, self.photons_per_pass, self.alpha)
+        check_progressive(
+            1.0 if self.radius is None else self.radius, self.photons_per_pass, self.alpha
+        )
+
+    def initial_radius(self, index: PointIndex, footprint: Footprint, first: PhotonMap) -> Radius:
+        """The initial radius: the one given, or (n,) float64 per point of `index` from the
+        first pass's photons and the points' pixel footprints (n,) (None: unknown)."""
+        if self.radius is not None:
+            return self.radius
+        return initial_radii(index.position, index.normal, footprint, first, self.scale)
 
     def estimate(self, points: VisiblePoints, photons: Photons, watch: Watch = None) -> np.ndarray:
         """(N, 3) float32 caustic radiance leaving each visible point, passes of the map;
@@ -90,6 +113,6 @@ class Progressive:
 class PPM(Progressive):
     """PPM at fixed visible points: initial radius (scene units), emitted paths per pass."""
 
-    def start(self, n: int) -> PPMState:
-        """The state before the first pass, for n points."""
-        return PPMState.start(n, self.radius, self.alpha)
+    def start(self, n: int, radius: Radius) -> PPMState:
+        """The state before the first pass, for n points with initial radius `radius`."""
+        return PPMState.start(n, radius, self.alpha)

@@ -53,11 +53,18 @@ def estimate_in_passes(
     hit = np.flatnonzero(points.hit)
     with watch("estimate"):
         index = PointIndex(points.position[hit], points.normal[hit])
-        state = estimator.start(len(hit))
-        for part in photons.split(estimator.photons_per_pass):
+        passes = photons.split(estimator.photons_per_pass)
+        radius = estimator.initial_radius(index, footprint(points, hit), passes[0])
+        state = estimator.start(len(hit), radius)
+        for part in passes:
             state.add(index, part, watch)
         out[hit] = reflected(points.albedo[hit], state.irradiance())
     return out
+
+
+def footprint(points: VisiblePoints, rows: np.ndarray) -> np.ndarray | None:
+    """(len(rows),) pixel width at those points (scene units), or None when not known."""
+    return None if points.footprint is None else points.footprint[rows]
 
 
 def fingerprint(
@@ -138,16 +145,18 @@ def run_passes(
     watch = watch or Stopwatch()
     hit = np.flatnonzero(points.hit)
     index = PointIndex(points.position[hit], points.normal[hit])
-    state = estimator.start(len(hit))
+    state = None  # started at the first pass, whose photons may set the radii
     key = fingerprint(estimator, scene, points, seed, guided)
     if checkpoint is not None and checkpoint.exists():
-        state = type(state).from_arrays(_load(checkpoint, key))
+        empty = estimator.start(0, 1.0)  # only its class, to read the statistics into
+        state = type(empty).from_arrays(_load(checkpoint, key))
     per_pass = estimator.photons_per_pass
     n_passes = -(-n_paths // per_pass)
     last = n_passes if stop_after is None else min(n_passes, stop_after)
     saved = time.monotonic()
-    with tqdm(total=n_passes, initial=state.passes, unit="pass", disable=not progress) as bar:
-        for j in range(state.passes, last):
+    done = 0 if state is None else state.passes
+    with tqdm(total=n_passes, initial=done, unit="pass", disable=not progress) as bar:
+        for j in range(done, last):
             first = j * per_pass
             with watch("photons"):
                 photons = trace_photons(
@@ -155,11 +164,16 @@ def run_passes(
                     caustic_only=True, first_path=first, guided=guided,
                 )  # fmt: skip
             with watch("estimate"):
+                if state is None:
+                    radius = estimator.initial_radius(index, footprint(points, hit), photons)
+                    state = estimator.start(len(hit), radius)
                 state.add(index, photons, watch)
             bar.update(1)
             if checkpoint is not None and time.monotonic() - saved > CHECKPOINT_SECONDS:
                 _save(checkpoint, key, state.arrays())
                 saved = time.monotonic()
+    if state is None:  # no pass run: nothing gathered, at any radius
+        state = estimator.start(len(hit), estimator.radius or 1.0)
     if checkpoint is not None:
         _save(checkpoint, key, state.arrays())
     out = np.zeros((len(points), 3), np.float32)

@@ -24,7 +24,6 @@ from dpm.scene import Scene
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import BVH, VisiblePoints, trace_photons
 
-RADIUS_FRACTION = 1e-3  # default initial radius, as a fraction of the scene's bounding diagonal
 PASSES = 10  # default passes of the progressive methods: photons_per_pass = photons / PASSES
 
 
@@ -153,9 +152,10 @@ class Progressive(PhotonMethod):
         """The estimator with this render's initial radius and paths per pass."""
         return self.make_estimator(radius=self.radius(), photons_per_pass=self.photons_per_pass())
 
-    def radius(self) -> float:
-        """Initial radius: --radius, or RADIUS_FRACTION of the scene's bounding diagonal."""
-        return self.options.radius or default_radius(self.scene)
+    def radius(self) -> float | None:
+        """Initial radius: --radius, or None: each point's own, from what the camera sees
+        (`dpm.density.radius`)."""
+        return self.options.radius
 
     def photons_per_pass(self) -> int:
         """Emitted paths per pass: --photons-per-pass, or photons / PASSES."""
@@ -189,9 +189,3 @@ def check_photons(options: RenderOptions) -> None:
             f"--photons must be at least 1 for method {options.method} (for an image "
             "without caustics use --method pt-nocaustic)"
         )
-
-
-def default_radius(scene: Scene) -> float:
-    """Initial radius of the progressive methods: RADIUS_FRACTION of the bounding diagonal."""
-    lo, hi = scene.bounds
-    return float(RADIUS_FRACTION * np.linalg.norm(np.asarray(hi, np.float64) - lo))

@@ -30,7 +30,7 @@ from scipy.special import chdtri  # not scipy.stats: its import costs ~0.8 s at 
 
 from dpm.density.base import in_plane, tangent_frame
 from dpm.density.gather import PointIndex
-from dpm.density.ppm import PPMState, Progressive
+from dpm.density.ppm import PPMState, Progressive, Radius, start_radius
 from dpm.density.progressive import ALPHA
 from dpm.methods.base import Progressive as ProgressiveMethod
 from dpm.stopwatch import Stopwatch
@@ -49,10 +49,11 @@ class CPPMState(PPMState):
     cells: np.ndarray  # (n, CELLS) float64 photons per cell since R last changed
 
     @classmethod
-    def start(cls, n: int, radius: float, alpha: float = ALPHA) -> CPPMState:
-        """A state of n points with initial radius `radius` and nothing gathered."""
+    def start(cls, n: int, radius: float | np.ndarray, alpha: float = ALPHA) -> CPPMState:
+        """A state of n points with initial radius `radius` (one, or (n,) per point) and
+        nothing gathered."""
         return cls(
-            np.full(n, float(radius)), np.zeros(n), np.zeros((n, 3)), np.zeros((n, CELLS)),
+            start_radius(n, radius), np.zeros(n), np.zeros((n, 3)), np.zeros((n, CELLS)),
             alpha=alpha,
         )  # fmt: skip
 
@@ -93,9 +94,9 @@ class CPPMState(PPMState):
 class CPPM(Progressive):
     """CPPM at fixed visible points: initial radius (scene units), emitted paths per pass."""
 
-    def start(self, n: int) -> CPPMState:
-        """The state before the first pass, for n points."""
-        return CPPMState.start(n, self.radius, self.alpha)
+    def start(self, n: int, radius: Radius) -> CPPMState:
+        """The state before the first pass, for n points with initial radius `radius`."""
+        return CPPMState.start(n, radius, self.alpha)
 
 
 class ChiSquaredPPM(ProgressiveMethod):

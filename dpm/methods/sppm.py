@@ -19,6 +19,7 @@ from dpm.camera import Camera
 from dpm.density.gather import PointIndex
 from dpm.density.ppm import ALPHA, PPMState, check_progressive
 from dpm.density.progressive import pass_seed
+from dpm.density.radius import initial_radii
 from dpm.errors import InputError
 from dpm.methods.base import Progressive
 from dpm.options import RenderOptions
@@ -33,7 +34,7 @@ def sppm_caustics(
     camera: Camera,
     n_paths: int,
     seed: int,
-    radius: float,
+    radius: float | None,
     photons_per_pass: int,
     alpha: float = ALPHA,
     progress: bool = False,
@@ -41,10 +42,11 @@ def sppm_caustics(
 ) -> tuple[np.ndarray, int]:
     """((H, W, 3) float32 caustic radiance per pixel as the camera sees it, caustic photons)
     from n_paths emitted photon paths in passes of photons_per_pass from the initial radius
-    (scene units); stages "visible_points", "photons", "gather" and "estimate" count on watch."""
-    check_progressive(radius, photons_per_pass, alpha)
+    (scene units; None: each pixel's from its first visible point, `pixel_radii`); stages
+    "visible_points", "photons", "gather" and "estimate" count on watch."""
+    check_progressive(radius or 1.0, photons_per_pass, alpha)
     watch = watch or Stopwatch()
-    state = PPMState.start(camera.width * camera.height, radius, alpha)
+    state = PPMState.start(camera.width * camera.height, radius or 1.0, alpha)
     n_passes = -(-n_paths // photons_per_pass)
     for j in tqdm(range(n_passes), unit="pass", disable=not progress, desc="sppm"):
         with watch("visible_points"):
@@ -56,9 +58,25 @@ def sppm_caustics(
                 scene, bvh, min(photons_per_pass, n_paths - j * photons_per_pass), seed,
                 caustic_only=True, first_path=j * photons_per_pass,
             )  # fmt: skip
+        if j == 0 and radius is None:
+            with watch("estimate"):
+                state.radius = pixel_radii(points, photons)
         sppm_gather((state,), points, photons, watch)
     image = state.irradiance()  # already weighted by throughput · ρ/π: radiance
     return image.reshape(camera.height, camera.width, 3).astype(np.float32), state.photons
+
+
+def pixel_radii(points: VisiblePoints, photons: PhotonMap) -> np.ndarray:
+    """(P,) float64 initial radius per pixel from its first pass's visible point (one per
+    pixel) and photons (`dpm.density.radius.initial_radii`); pixels that saw no diffuse
+    surface take the median."""
+    hit = np.flatnonzero(points.hit)
+    footprint = None if points.footprint is None else points.footprint[hit]
+    found = initial_radii(points.position[hit], points.normal[hit], footprint, photons)
+    fill = float(np.median(found)) if len(found) else 1.0
+    radius = np.full(len(points), fill)
+    radius[hit] = found
+    return radius
 
 
 def sppm_gather(

@@ -81,13 +81,18 @@ class VisiblePoints:
     hit: np.ndarray  # (N,) bool: found a diffuse surface
     pixel: np.ndarray  # (N,) int32 row-major pixel index y·W + x
     sample: np.ndarray  # (N,) int64 random stream of the sample, (y·W + x)·spp + s
+    # (N,) float32 pixel width at the point (scene units, `Camera.footprint`; 0 on a miss);
+    # None for points not seen through a camera
+    footprint: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.hit)
 
     def select(self, mask: np.ndarray) -> VisiblePoints:
         """The rows where mask (N,) bool is set."""
-        return VisiblePoints(*(getattr(self, f.name)[mask] for f in fields(self)))
+        return VisiblePoints(
+            *(None if (a := getattr(self, f.name)) is None else a[mask] for f in fields(self))
+        )
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
@@ -236,7 +241,8 @@ def trace_visible_points(
         bvh.arrays, bvh.depth, scene.kernel_arrays(), camera.basis(), camera.width,
         camera.height, row0, row1, spp, seed, spawn_offset(scene), *vec, hit, pixel, sample,
     )  # fmt: skip
-    return VisiblePoints(*vec, hit, pixel, sample)
+    footprint = np.where(hit, camera.footprint(vec[0]), np.float32(0))
+    return VisiblePoints(*vec, hit, pixel, sample, footprint)
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
