@@ -145,16 +145,36 @@ def run_unseen(
             rows[n] = {**row, "default": {}, "best": {}}
             continue
         row["default"] = defaults(points, photons, reference, n)
-        if tune or "best" not in row:
-            grid = width * np.geomspace(0.15, 6.0, 10)
-            trials = tune_widening(points, photons, reference, grid, methods=TUNED)
-            row["best"] = {m: asdict(best(trials, m)) for m in TUNED}
-            row["trials"] = [asdict(t) for t in trials]
         rows[n] = row
-        print(name, n, row["default"], {m: row["best"][m]["rmse"] for m in TUNED}, flush=True)
+        print(name, n, row["default"], flush=True)
+        if not tune and "best" in row:
+            continue
+        row["best"], row["trials"] = {}, []
+        grid = width * np.geomspace(0.15, 6.0, 10)
+        for m in TUNED:  # the record is saved after each method: a long run keeps its part
+            trials = tune_widening(points, photons, reference, grid, methods=(m,))
+            row["best"][m] = asdict(best(trials, m))
+            row["trials"] += [asdict(t) for t in trials]
+            save(OUT / "unseen" / f"{name}.json", unseen_record(name, points, noise, paths, rows))
+            print(name, n, m, row["best"][m]["rmse"], flush=True)
+    return unseen_record(name, points, noise, paths, rows)
+
+
+def unseen_record(
+    name: str, points: VisiblePoints, noise: float, paths: int, rows: dict[int, dict]
+) -> dict:
+    """The JSON record of an unseen scene, its rows in budget order."""
+    width = float(np.median(points.footprint[points.hit]))
     out = record(name, "unseen", points, noise, [rows[n] for n in sorted(rows)])
     out["reference"] = {"paths": paths, "radius": REFERENCE_FOOTPRINTS * width}
     return out
+
+
+def save(path: Path, rec: dict) -> None:
+    """Write a JSON record atomically."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic(path) as tmp:
+        tmp.write_text(json.dumps(rec, indent=1))
 
 
 def record(name: str, set_: str, points: VisiblePoints, noise: float, rows: list) -> dict:
@@ -172,6 +192,8 @@ def ratios(records: list[dict]) -> dict[str, list[float]]:
         for row in r["budgets"]:
             if not row["default"]:
                 continue
+            if any(m not in row.get("best", {}) for m in TUNED):
+                continue  # tuning unfinished
             classic = min(row["best"][m]["rmse"] for m in TUNED)
             for m in DEFAULTS:
                 own = row["best"][m]["rmse"] if m in TUNED else classic
@@ -203,8 +225,9 @@ def markdown() -> str:
         rows = []
         for r in records:
             for row in r["budgets"]:
-                if not row["default"]:
-                    rows.append([r["scene"], f"{row['paths']:,}", "0", "–", *["–"] * 4])
+                if not row["default"] or any(m not in row.get("best", {}) for m in TUNED):
+                    rows.append([r["scene"], f"{row['paths']:,}", f"{row['caustic_photons']:,}",
+                                 "–", *["–"] * 4])  # fmt: skip
                     continue
                 classic = min(row["best"][m]["rmse"] for m in TUNED)
                 cells = [
@@ -216,7 +239,8 @@ def markdown() -> str:
         summary = ratios(records)
         lines += ["", f"## {set_} ({records[0]['machine']})", "", *markdown_table(head, rows), ""]
         for m, values in summary.items():
-            lines.append(f"- {m}: geometric mean {geomean(values):.2f}, worst {max(values):.2f}"
+            worst = max(values, default=float("nan"))
+            lines.append(f"- {m}: geometric mean {geomean(values):.2f}, worst {worst:.2f}"
                          f" ({len(values)} rows)")  # fmt: skip
     return "\n".join(lines) + "\n"
 
@@ -247,10 +271,7 @@ def main() -> None:
                     name, args.reference_paths, tuple(args.budgets), not args.defaults_only
                 )
             )  # fmt: skip
-            folder = OUT / args.set
-            folder.mkdir(parents=True, exist_ok=True)
-            with atomic(folder / f"{name}.json") as tmp:
-                tmp.write_text(json.dumps(rec, indent=1))
+            save(OUT / args.set / f"{name}.json", rec)
     text = markdown()
     with atomic(RESULTS / "radius_defaults.md") as tmp:
         tmp.write_text(text)

@@ -17,8 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dpm.density.base import luminance
-from dpm.density.gather import PhotonIndex, PointIndex
+from dpm.density.gather import PhotonIndex
 from dpm.tracer import PhotonMap
 
 NEAREST = 8  # the photon of the first pass whose distance measures the density
@@ -60,38 +59,3 @@ def initial_radii(
     finite = np.isfinite(radius) & (radius > 0)
     fill = float(radius[finite].max()) if finite.any() else 1.0
     return np.where(finite, radius, fill)
-
-
-SCALES = np.geomspace(0.25, 4.0, 9)  # the candidate multiples of the initial radii
-CV_POINTS = 8192  # at most this many points (a regular subset) judge the candidates
-
-
-def cross_validated_scale(
-    position: np.ndarray, normal: np.ndarray, photons: PhotonMap, radius: np.ndarray
-) -> float:
-    """The multiple of `radius` (N,) in SCALES whose disc estimates best predict independent
-    photons: the first pass's paths split in two halves A and B (even and odd paths), each
-    half's disc estimate at s · radius is compared, point by point, with the other half's at
-    the smallest scale (nearly unbiased, noisy: its noise adds the same to every s), so the
-    mean squared difference is least where the estimate's own error (bias² + variance) is.
-    Smooth caustics so choose wide discs, sharp ones narrow: the choice a tuned radius makes
-    with a reference, made without one. A half has half the photons, and the best radius
-    grows as N^(-1/6), so the result is scaled by 2^(-1/6)."""
-    if len(photons) == 0 or len(position) == 0:
-        return 1.0
-    every = -(-len(position) // CV_POINTS)  # a regular subset: the mean needs no more
-    position, normal, radius = position[::every], normal[::every], radius[::every]
-    index = PointIndex(position, normal)
-    pairs = index.within(photons, SCALES[-1] * radius)
-    half = photons.path[pairs.photon] % 2
-    flux = 2 * luminance(photons.flux[pairs.photon].astype(np.float64))  # a half's paths
-    n = len(position)
-    ratio = pairs.distance / radius[pairs.point]
-
-    def disc(s: float, h: int) -> np.ndarray:
-        inside = (ratio < s) & (half == h)
-        return np.bincount(pairs.point[inside], flux[inside], n) / (np.pi * (s * radius) ** 2)
-
-    pilot = [disc(SCALES[0], h) for h in (0, 1)]
-    risk = [np.mean((disc(s, 0) - pilot[1]) ** 2 + (disc(s, 1) - pilot[0]) ** 2) for s in SCALES]
-    return float(SCALES[int(np.argmin(risk))] * 2 ** (-1 / 6))
