@@ -44,7 +44,10 @@ OUT = RESULTS / "equal_time"
 VARIANT = "llvm_ad_rgb"
 CALIBRATION_SPP = (4, 32)
 
-MITSUBA_CHILD = r"""
+# The Mitsuba child's common part (argv: desc.json, spp, variant, out, seed, ...): the scene
+# description with the aov integrator (color, albedo, normal) at `spp` samples per pixel, and
+# `denoise(out)`: (plain color, OIDN-denoised color) of a render's (H, W, 9) output.
+MITSUBA_PRELUDE = r"""
 import json, sys
 import numpy as np
 import mitsuba as mi
@@ -58,12 +61,23 @@ spp = int(sys.argv[2])
 s["sampler"]["sample_count"] = spp
 desc["integrator"] = {"type": "aov", "aovs": "albedo:albedo,nn:sh_normal",
                       "integrator": {"type": "path"}}
-out = np.array(mi.render(mi.load_dict(desc), spp=spp, seed=int(sys.argv[5])), dtype=np.float32)
-color = np.ascontiguousarray(np.maximum(np.nan_to_num(out[..., :3]), 0))
-albedo = np.ascontiguousarray(np.clip(out[..., 3:6], 0, 1))
-normal = np.ascontiguousarray(np.nan_to_num(out[..., 6:9]))
-np.save(sys.argv[4], pyoidn.denoise(color, albedo, normal, hdr=True, quality="high"))
+
+
+def denoise(out):
+    out = np.asarray(out, dtype=np.float32)
+    color = np.ascontiguousarray(np.maximum(np.nan_to_num(out[..., :3]), 0))
+    albedo = np.ascontiguousarray(np.clip(out[..., 3:6], 0, 1))
+    normal = np.ascontiguousarray(np.nan_to_num(out[..., 6:9]))
+    return color, pyoidn.denoise(color, albedo, normal, hdr=True, quality="high")
 """
+
+MITSUBA_CHILD = (
+    MITSUBA_PRELUDE
+    + r"""
+out = np.array(mi.render(mi.load_dict(desc), spp=spp, seed=int(sys.argv[5])), dtype=np.float32)
+np.save(sys.argv[4], denoise(out)[1])
+"""
+)
 
 
 def wall(command: list[str]) -> float:
@@ -73,8 +87,9 @@ def wall(command: list[str]) -> float:
     return time.perf_counter() - start
 
 
-def mitsuba_setup(scene, camera, folder: Path) -> Path:
-    """Convert the scene for the Mitsuba child (untimed): PLY files and desc.json."""
+def mitsuba_setup(scene, camera, folder: Path, child: str = MITSUBA_CHILD) -> Path:
+    """Convert the scene for the Mitsuba child (untimed): PLY files and desc.json; the
+    child's script (`child`) as child.py beside it."""
     desc = mitsuba_scene(scene, camera, 1, folder)
     c = camera
     desc["sensor"]["look_at"] = {
@@ -83,7 +98,7 @@ def mitsuba_setup(scene, camera, folder: Path) -> Path:
     del desc["sensor"]["to_world"]
     path = folder / "desc.json"
     path.write_text(json.dumps(desc))
-    (folder / "child.py").write_text(MITSUBA_CHILD)
+    (folder / "child.py").write_text(child)
     return path
 
 

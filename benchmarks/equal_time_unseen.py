@@ -1,0 +1,299 @@
+"""The default render against Mitsuba 3 `path` at equal whole-process wall time, unseen scenes.
+
+    python benchmarks/equal_time_unseen.py [SCENE ...] [--times T ...]
+
+On the unseen-scene set (`benchmarks/scenes/make_unseen.py`; default: all of it, the two
+diffuse controls included), at the resolution W x H of each scene's Mitsuba 3 reference
+(`benchmarks/scenes/unseen_references.py`: results/unseen/NAME-WxH-mitsuba.exr, two halves of
+4096 spp; W = min(camera width, 256)) and for each budget T of --times:
+
+- dpm: `dpm-render SCENE --time T --width W --height H --seed S` in a fresh process, wall
+  seconds from launch to exit (`equal_time.dpm_run`).
+- Mitsuba 3 (llvm_ad_rgb with the libLLVM `unseen_references.mitsuba_variant` finds): a fresh
+  child process time-boxed to the seconds dpm just took, counted from its launch. It imports
+  Mitsuba, loads the scene (converted once beforehand, untimed: `equal_time.mitsuba_setup`),
+  renders batches of BATCH_SPP (16; --batch-spp) samples per pixel with different seeds through
+  the aov integrator (color, albedo, normal; `path` with its defaults inside, as `equal_time`),
+  accumulating their mean, until the next batch (the mean of the batches so far, the first left
+  out once there are more) plus a reserve would overrun the budget, then writes the plain mean
+  and its OIDN-denoised image (`equal_time`'s denoise call). At least one batch. The reserve is
+  the seconds from the end of rendering to the process's exit (denoise, save, interpreter exit)
+  that the previous Mitsuba run of the scene took (first: the warm-up's).
+- Per budget dpm runs first, then Mitsuba at once (the load of the machine falls on both in
+  turn, budget after budget); the load average (`os.getloadavg`) is recorded at the start and
+  end of each scene. Both sides run once untimed first per scene (dpm at the largest budget,
+  so Numba's cache is warm; Mitsuba one short run, for Dr.Jit's kernel cache and the reserve).
+- Scored by RMSE (`dpm.metrics.rmse`, all pixels and channels) against the reference's mean;
+  Mitsuba's score is the better of plain and OIDN; ratio = dpm / Mitsuba's best.
+
+Writes a JSON record per scene to results/equal_time_unseen/NAME.json (a rerun of some scenes
+rebuilds the table from all records), results/equal_time_unseen.md, and per scene
+results/equal_time_unseen/NAME.png (dpm | Mitsuba's best | reference, at the budget nearest 4 s).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import imageio.v3 as iio
+import numpy as np
+from equal_time import MITSUBA_PRELUDE, dpm_run, mitsuba_setup
+
+sys.path.insert(0, str(Path(__file__).parent / "scenes"))
+from make_unseen import CONTROLS, UNSEEN, unseen_scenes  # noqa: E402
+from unseen_references import OUT as REFERENCES  # noqa: E402
+from unseen_references import mitsuba_variant  # noqa: E402
+
+from common import RESULTS, cpu, markdown_table, save_records  # noqa: E402
+from dpm import load_scene  # noqa: E402
+from dpm.io import linear_to_srgb8, read_exr  # noqa: E402
+from dpm.metrics import rmse  # noqa: E402
+
+OUT = RESULTS / "equal_time_unseen"
+TABLE = RESULTS / "equal_time_unseen.md"
+TIMES = (2.0, 4.0, 8.0, 16.0)
+MAX_WIDTH = 256  # the references' width: min(camera width, MAX_WIDTH)
+BATCH_SPP = 16  # Mitsuba samples per pixel per render call
+WARM_BUDGET = 1.0  # seconds of Mitsuba's untimed warm-up run (at least one batch)
+SEED_STRIDE = 100_000  # Mitsuba's seeds: SEED_STRIDE * (budget index + 1) + batch; the
+# references' are 1,000,000 + x and 2,000,000 + x (x < 8192), so none is shared
+PICTURE_BUDGET = 4.0  # the side-by-side image's budget (the nearest one run)
+
+# argv: desc.json, spp per batch, variant, out.npz, first seed, launch (time.monotonic() of the
+# parent just before it started this process), budget seconds, reserve seconds
+MITSUBA_TIMEBOX = (
+    MITSUBA_PRELUDE
+    + r"""
+import time
+launch, budget, reserve = (float(a) for a in sys.argv[6:9])
+scene = mi.load_dict(desc)
+loaded = time.monotonic()
+total, batches, dropped = None, [], 0
+while True:
+    start = time.monotonic()
+    image = np.array(mi.render(scene, spp=spp, seed=int(sys.argv[5]) + len(batches)),
+                     dtype=np.float64)
+    batches.append(time.monotonic() - start)
+    finite = np.isfinite(image)
+    dropped += int((~finite).sum())
+    image = np.where(finite, image, 0.0)
+    total = image if total is None else total + image
+    batch = float(np.mean(batches[1:] if len(batches) > 1 else batches))
+    if time.monotonic() + batch + reserve > launch + budget:
+        break
+rendered = time.monotonic()
+plain, oidn = denoise(total / len(batches))
+np.savez(sys.argv[4], plain=plain, oidn=oidn)
+saved = time.monotonic()
+info = {"spp": spp * len(batches), "batches": len(batches), "batch_seconds": batches,
+        "loaded": loaded - launch, "rendered": rendered - launch, "saved": saved - launch,
+        "nonfinite_dropped": dropped}
+open(sys.argv[4] + ".json", "w").write(json.dumps(info))
+"""
+)
+
+
+def reference_file(name: str, camera_width: int) -> tuple[int, int, Path]:
+    """(W, H, EXR path) of scene `name`'s Mitsuba reference in results/unseen: the one that is
+    there, or of several the one MAX_WIDTH or the camera's width wide."""
+    found = {}
+    for path in REFERENCES.glob(f"{name}-*-mitsuba.exr"):
+        match = re.fullmatch(rf"{re.escape(name)}-(\d+)x(\d+)-mitsuba\.exr", path.name)
+        if match and path.with_suffix(".json").exists():
+            found[int(match.group(1))] = (int(match.group(1)), int(match.group(2)), path)
+    if not found:
+        raise SystemExit(f"{name}: no reference in {REFERENCES} (benchmarks/scenes/"
+                         "unseen_references.py --only mitsuba builds it)")  # fmt: skip
+    return found.get(min(camera_width, MAX_WIDTH)) or next(iter(found.values()))
+
+
+def mitsuba_timebox(
+    desc: Path, variant: str, budget: float, reserve: float, seed: int, batch_spp: int = BATCH_SPP
+) -> tuple[np.ndarray, np.ndarray, float, dict]:
+    """(plain mean, OIDN-denoised, whole-process seconds, the child's record) of a Mitsuba
+    child time-boxed to `budget` seconds from its launch, keeping `reserve` seconds for the
+    end. The record's "tail" is the seconds from the end of rendering to the exit."""
+    out = desc.with_name("timebox.npz")
+    launch = time.monotonic()
+    subprocess.run(
+        [sys.executable, str(desc.with_name("child.py")), str(desc), str(batch_spp), variant,
+         str(out), str(seed), repr(launch), repr(budget), repr(reserve)],
+        check=True, stdout=subprocess.DEVNULL,
+    )  # fmt: skip
+    seconds = time.monotonic() - launch
+    info = json.loads(Path(f"{out}.json").read_text())
+    info["tail"] = seconds - info["rendered"]
+    assert info["batches"] < SEED_STRIDE, "batches' seeds would overlap the next budget's"
+    with np.load(out) as z:
+        return z["plain"], z["oidn"], seconds, info
+
+
+def load() -> list[float]:
+    """The machine's load averages over 1, 5 and 15 minutes."""
+    return [round(x, 2) for x in os.getloadavg()]
+
+
+def run_scene(name: str, times: list[float], variant: str, batch_spp: int = BATCH_SPP) -> dict:
+    """Both renderers at each budget on scene `name`; errors, seconds, spp and load."""
+    path = {p.stem: p for p in unseen_scenes()}[name]
+    scene = load_scene(path)
+    width, height, ref_path = reference_file(name, scene.camera.width)
+    camera = scene.camera.with_resolution(width, height)
+    ref = read_exr(ref_path)
+    noise = json.loads(ref_path.with_suffix(".json").read_text())
+    load_start = load()
+    print(f"{name} {width}x{height}: load average {load_start}", flush=True)
+    rows, images = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        desc = mitsuba_setup(scene, camera, folder, MITSUBA_TIMEBOX)
+        dpm_run(path, width, height, max(times), 0, folder)  # warm Numba's cache, untimed
+        *_, warm = mitsuba_timebox(desc, variant, WARM_BUDGET, 0.0, 0, batch_spp)
+        reserve = warm["tail"]
+        for i, budget in enumerate(times):
+            ours, ours_s, stats = dpm_run(path, width, height, budget, i + 1, folder)
+            plain, oidn, theirs_s, info = mitsuba_timebox(
+                desc, variant, ours_s, reserve, SEED_STRIDE * (i + 1), batch_spp
+            )
+            plain_rmse, oidn_rmse = rmse(plain, ref), rmse(oidn, ref)
+            ours_rmse = rmse(ours, ref)
+            rows.append({
+                "budget": budget, "dpm_s": ours_s, "passes": stats["passes"],
+                "plan": stats.get("plan", {}).get("reason"), "dpm_rmse": ours_rmse,
+                "mitsuba_s": theirs_s, "mitsuba_spp": info["spp"],
+                "mitsuba_plain_rmse": plain_rmse, "mitsuba_oidn_rmse": oidn_rmse,
+                "ratio": ours_rmse / min(plain_rmse, oidn_rmse), "reserve_s": reserve,
+                "mitsuba_loaded_s": info["loaded"], "mitsuba_rendered_s": info["rendered"],
+                "mitsuba_batch_s": float(np.median(info["batch_seconds"])),
+                "mitsuba_tail_s": info["tail"], "mitsuba_nonfinite": info["nonfinite_dropped"],
+            })  # fmt: skip
+            images.append((ours, plain if plain_rmse <= oidn_rmse else oidn))
+            reserve = info["tail"]
+            shown = ("dpm_s", "passes", "dpm_rmse", "mitsuba_s", "mitsuba_spp",
+                     "mitsuba_plain_rmse", "mitsuba_oidn_rmse", "ratio")  # fmt: skip
+            print(f"{name} {budget:g} s:", {k: round(rows[-1][k], 4) for k in shown}, flush=True)
+    load_end = load()
+    print(f"{name}: load average {load_end}", flush=True)
+    pick = int(np.argmin([abs(b - PICTURE_BUDGET) for b in times]))
+    gap = np.ones((height, 4, 3), np.float32)
+    strip = np.concatenate([images[pick][0], gap, images[pick][1], gap, ref], axis=1)
+    iio.imwrite(OUT / f"{name}.png", linear_to_srgb8(strip))
+    return {
+        "scene": name, "control": name in CONTROLS, "size": f"{width}x{height}",
+        "reference": ref_path.name, "reference_noise_rgb": noise["noise_rgb"],
+        "reference_noise_luminance": noise["noise_luminance"],
+        "reference_spp_per_half": noise["spp_per_half"], "variant": variant,
+        "batch_spp": batch_spp, "picture_budget": times[pick], "load_start": load_start,
+        "load_end": load_end, "cpu": cpu(), "date": str(datetime.date.today()), "rows": rows,
+    }  # fmt: skip
+
+
+def summary(records: list[dict]) -> str:
+    """One line: geometric mean, worst row and rows above 1.0 of the records' ratios."""
+    rows = [(r["scene"], x["budget"], x["ratio"]) for r in records for x in r["rows"]]
+    if not rows:
+        return "no rows."
+    ratios = np.array([ratio for *_, ratio in rows])
+    worst = rows[int(np.argmax(ratios))]
+    return (f"geometric mean of dpm / Mitsuba best {float(np.exp(np.mean(np.log(ratios)))):.2f}"
+            f" over {len(rows)} rows; worst {worst[2]:.2f} ({worst[0]} at {worst[1]:g} s); "
+            f"{int((ratios > 1.0).sum())} of {len(rows)} rows above 1.0.")  # fmt: skip
+
+
+def report(records: list[dict]) -> str:
+    """The Markdown report: a table per group (caustic scenes, controls) and their summaries."""
+    order = {name: i for i, name in enumerate(UNSEEN)}
+    records = sorted(records, key=lambda r: order.get(r["scene"], len(order)))
+    head = ["scene", "W x H", "budget s", "dpm wall s", "passes", "dpm RMSE", "Mitsuba spp",
+            "Mitsuba wall s", "Mitsuba plain RMSE", "Mitsuba OIDN RMSE",
+            "dpm / Mitsuba best"]  # fmt: skip
+
+    def table(group: list[dict]) -> list[str]:
+        rows = [
+            [r["scene"], r["size"], f"{x['budget']:g}", f"{x['dpm_s']:.2f}", str(x["passes"]),
+             f"{x['dpm_rmse']:.4f}", str(x["mitsuba_spp"]), f"{x['mitsuba_s']:.2f}",
+             f"{x['mitsuba_plain_rmse']:.4f}", f"{x['mitsuba_oidn_rmse']:.4f}",
+             f"{x['ratio']:.2f}"]
+            for r in group for x in r["rows"]
+        ]  # fmt: skip
+        return markdown_table(head, rows)
+
+    caustic = [r for r in records if not r["control"]]
+    controls = [r for r in records if r["control"]]
+    walls = [abs(x["mitsuba_s"] / x["dpm_s"] - 1) for r in records for x in r["rows"]]
+    machines = sorted({r["cpu"] for r in records})
+    dates = sorted({r["date"] for r in records})
+    variants = sorted({r["variant"] for r in records})
+    batches = ", ".join(str(b) for b in sorted({r["batch_spp"] for r in records}))
+    per_scene = [
+        f"- {r['scene']} ({r['size']}): reference noise {r['reference_noise_rgb']:.4f} RGB, "
+        f"{r['reference_noise_luminance']:.4f} luminance (2 x {r['reference_spp_per_half']} "
+        f"spp); load average {r['load_start']} at the start, {r['load_end']} at the end; "
+        f"plan at {r['rows'][-1]['budget']:g} s: {r['rows'][-1]['plan']}"
+        for r in records
+    ]
+    lines = [
+        "# Default render vs Mitsuba 3 path (+ OIDN) at equal wall time, unseen scenes",
+        "",
+        "Made by `python benchmarks/equal_time_unseen.py` (see its docstring): whole-process",
+        "wall time from launch to exit, both warm; Mitsuba time-boxed to dpm's measured wall",
+        f"time, in batches of {batches} spp; RMSE against the scene's Mitsuba 3 reference",
+        "(2 x 4096 spp); Mitsuba's score is the better of its plain mean and its OIDN image.",
+        f"Machine: {'; '.join(machines)}; Mitsuba {', '.join(variants)}; {', '.join(dates)}.",
+        "Load averages (1, 5, 15 min) per scene below.",
+        "",
+        "## Scenes with caustics",
+        "",
+        *table(caustic),
+        "",
+        "Caustic scenes: " + summary(caustic),
+        "",
+        "## Diffuse-only controls",
+        "",
+        *table(controls),
+        "",
+        "Controls: " + summary(controls),
+        "",
+        f"Mitsuba's wall time vs dpm's: off by {100 * np.median(walls):.1f} % (median), "
+        f"{100 * max(walls):.1f} % at most." if walls else "",
+        "",
+        "The reference's own expected RMSE (`noise_rgb`: RMSE(A, B) / 2 of its halves) is part",
+        "of both sides' RMSE (in quadrature), so RMSEs near it say little:",
+        *per_scene,
+        "",
+        *[f"![{r['scene']}: dpm, Mitsuba 3 best, reference at {r['picture_budget']:g} s]"
+          f"(equal_time_unseen/{r['scene']}.png)" for r in records],
+    ]  # fmt: skip
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    """Run the comparison on the unseen scenes named (default: all) and rebuild the report."""
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("scenes", nargs="*", help=f"scenes (default: all): {', '.join(UNSEEN)}")
+    p.add_argument("--times", type=float, nargs="+", default=list(TIMES))
+    p.add_argument("--batch-spp", type=int, default=BATCH_SPP, help="Mitsuba spp per batch")
+    args = p.parse_args()
+    unknown = set(args.scenes) - set(UNSEEN)
+    if unknown:
+        p.error(f"unknown scene(s) {sorted(unknown)}")
+    variant, env = mitsuba_variant(None)
+    if "DRJIT_LIBLLVM_PATH" in env:  # the Mitsuba children inherit it
+        os.environ["DRJIT_LIBLLVM_PATH"] = env["DRJIT_LIBLLVM_PATH"]
+    OUT.mkdir(parents=True, exist_ok=True)
+    names = args.scenes or list(UNSEEN)
+    run = lambda n: run_scene(n, args.times, variant, args.batch_spp)  # noqa: E731
+    save_records(OUT, names, run, report, TABLE)
+
+
+if __name__ == "__main__":
+    main()
