@@ -27,7 +27,7 @@ from common import (
 from dpm import load_scene
 from dpm.density.base import Estimator, luminance
 from dpm.density.reference import caustic_rmse
-from dpm.methods.base import PASSES, NearestPhotons, default_radius
+from dpm.methods.base import PASSES, NearestPhotons
 from dpm.nn.weights import weight_ks
 from dpm.scene import Scene
 from dpm.tracer import BVH, PhotonMap, VisiblePoints, build_bvh, trace_photons
@@ -133,9 +133,8 @@ def estimators(case: Case, budget: int, weights: Path | None = None) -> dict[str
         elif (best := tuned(case, name, budget)) is not None:
             methods[f"{label}-best"] = best
         else:
-            methods[label] = cls.make_estimator(
-                radius=default_radius(case.scene), photons_per_pass=max(1, budget // PASSES)
-            )
+            # no radius: each point's own, from its photons and pixel footprint
+            methods[label] = cls.make_estimator(photons_per_pass=max(1, budget // PASSES))
     return methods
 
 
