@@ -9,13 +9,13 @@ import argparse
 import os
 import sys
 import tempfile
-import time
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 
 from dpm import __version__
+from dpm.clock import process_started
 from dpm.errors import InputError
 from dpm.io import write_image, write_json
 from dpm.options import (
@@ -29,18 +29,6 @@ from dpm.options import (
 from dpm.render import render
 from dpm.scene import load_scene
 from dpm.stopwatch import Stopwatch
-
-
-def process_started() -> float:
-    """`time.monotonic()` when this process started (Linux: from /proc, so interpreter start
-    and imports count against a --time budget; elsewhere: now)."""
-    try:
-        with open("/proc/self/stat") as f:
-            ticks = int(f.read().rsplit(")", 1)[1].split()[19])  # field 22: starttime
-        age = time.clock_gettime(time.CLOCK_BOOTTIME) - ticks / os.sysconf("SC_CLK_TCK")
-        return time.monotonic() - max(0.0, age)
-    except (OSError, ValueError, IndexError, AttributeError):
-        return time.monotonic()
 
 
 class _Parser(argparse.ArgumentParser):

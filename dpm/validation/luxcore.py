@@ -70,6 +70,7 @@ from pathlib import Path
 import numpy as np
 
 from dpm.camera import Camera
+from dpm.clock import process_started
 from dpm.errors import InputError
 from dpm.scene import DIELECTRIC, MIRROR, Scene
 
@@ -401,18 +402,6 @@ def render_luxcore(
     stats = json.loads(done.stdout.strip().splitlines()[-1])
     stats["seconds_call"] = time.monotonic() - called
     return image, stats
-
-
-def process_started() -> float:
-    """`time.monotonic()` when this process started (Linux: from /proc, so interpreter start
-    and imports count against the budget; elsewhere: now), as `dpm.cli.process_started`."""
-    try:
-        with open("/proc/self/stat") as f:
-            ticks = int(f.read().rsplit(")", 1)[1].split()[19])  # field 22: starttime
-        age = time.clock_gettime(time.CLOCK_BOOTTIME) - ticks / os.sysconf("SC_CLK_TCK")
-        return time.monotonic() - max(0.0, age)
-    except (OSError, ValueError, IndexError, AttributeError):
-        return time.monotonic()
 
 
 def main(argv: list[str] | None = None) -> int:
