@@ -24,17 +24,16 @@ from dpm.data.builder import (
     UP,
     Mesh,
     Scene,
-    Vec,
+    add_light,
     back_wall,
     box,
     camera,
     dielectric,
     diffuse,
-    emitter,
     floor_rect,
     heightfield,
     lathe,
-    light_quad,
+    light_ke,
     merge,
     mirror,
     orient_outward,
@@ -56,23 +55,6 @@ FLOOR_KD = (0.7, 0.7, 0.7)
 
 # ---------------------------------------------------------------------------------------------
 # Geometry helpers
-
-
-def light_ke(
-    center: Vec, size: float, spot: Vec, radiance: float = 0.7, color: Vec = (1.0, 1.0, 1.0)
-) -> Vec:
-    """Ke that gives a floor point `spot` of albedo FLOOR_KD `radiance` under a facing light."""
-    d = np.asarray(spot, float) - np.asarray(center, float)
-    dist2 = float(d @ d)
-    cos_floor = abs(d[1]) / math.sqrt(dist2)
-    ke = math.pi * radiance * dist2 / (FLOOR_KD[0] * size * size * cos_floor)
-    return tuple(float(f"{ke * c:.3g}") for c in color)  # type: ignore[return-value]
-
-
-def add_light(scene: Scene, center: Vec, target: Vec, size: float, ke: Vec) -> None:
-    """Add a square area light looking at `target` with emitted radiance `ke`."""
-    scene.materials["light"] = emitter(ke)
-    scene.add("light", "light", light_quad(center, target, size))
 
 
 def add_floor(scene: Scene, half: float = 8.0, wall_z: float | None = None) -> None:

@@ -38,15 +38,15 @@ from dpm.data.builder import (
     Mesh,
     Scene,
     Vec,
+    add_light,
     box,
     camera,
     dielectric,
     diffuse,
-    emitter,
     floor_rect,
     heightfield,
     lathe,
-    light_quad,
+    light_ke,
     merge,
     mirror,
     orient_outward,
@@ -67,25 +67,6 @@ FLOOR_KD = (0.7, 0.7, 0.7)
 
 # ---------------------------------------------------------------------------------------------
 # Helpers
-
-
-def light_ke(
-    center: Vec, size: float, spot: Vec, normal: Vec = (0.0, 1.0, 0.0), radiance: float = 0.7,
-    albedo: float = FLOOR_KD[0], color: Vec = (1.0, 1.0, 1.0),
-) -> Vec:  # fmt: skip
-    """Ke of a square light of side `size` at `center` facing `spot` that gives a diffuse
-    surface there (unit normal `normal`, albedo `albedo`) the outgoing radiance `radiance`."""
-    d = np.asarray(spot, float) - np.asarray(center, float)
-    dist2 = float(d @ d)
-    cos_receiver = abs(float(np.dot(d, normal))) / math.sqrt(dist2)
-    ke = math.pi * radiance * dist2 / (albedo * size * size * cos_receiver)
-    return tuple(float(f"{ke * c:.3g}") for c in color)  # type: ignore[return-value]
-
-
-def add_light(scene: Scene, center: Vec, target: Vec, size: float, ke: Vec) -> None:
-    """Add the scene's square area light, looking from `center` at `target`."""
-    scene.materials["light"] = emitter(ke)
-    scene.add("light", "light", light_quad(center, target, size))
 
 
 def add_room(
@@ -182,7 +163,7 @@ def lens_wall() -> Scene:
                                          (wall_x, 2, 1.5)))  # fmt: skip
     light = (-2.0, 0.5, 0.0)
     spot = (wall_x, 0.5, 0.3)  # beside the focus: the wall's directly lit level
-    ke = light_ke(light, 0.15, spot, (-1.0, 0.0, 0.0), 0.35)
+    ke = light_ke(light, 0.15, spot, 0.35, normal=(-1.0, 0.0, 0.0))
     add_light(scene, light, centre, 0.15, ke)
     return scene
 

@@ -190,6 +190,27 @@ def light_quad(center: Vec, target: Vec, size: float) -> Mesh:
     return quad(c - u - v, c + u - v, c + u + v, c - u + v)
 
 
+def light_ke(
+    center: Vec, size: float, spot: Vec, radiance: float = 0.7, color: Vec = (1.0, 1.0, 1.0),
+    *, normal: Vec = (0.0, 1.0, 0.0), albedo: float = 0.7,
+) -> Vec:  # fmt: skip
+    """Ke (RGB radiance) of a square light of side `size` at `center` facing `spot` that gives
+    a diffuse surface there (unit normal `normal`, albedo `albedo`) the outgoing radiance
+    `radiance` (tinted by `color`)."""
+    d = np.asarray(spot, float) - np.asarray(center, float)
+    dist2 = float(d @ d)
+    cos_receiver = abs(float(np.dot(d, normal))) / math.sqrt(dist2)
+    ke = math.pi * radiance * dist2 / (albedo * size * size * cos_receiver)
+    return tuple(float(f"{ke * c:.3g}") for c in color)  # type: ignore[return-value]
+
+
+def add_light(scene: Scene, center: Vec, target: Vec, size: float, ke: Vec) -> None:
+    """Add the scene's square area light (material "light", emitted radiance `ke`) at
+    `center`, looking at `target`."""
+    scene.materials["light"] = emitter(ke)
+    scene.add("light", "light", light_quad(center, target, size))
+
+
 def spherical(azimuth_deg: float, elevation_deg: float, distance: float, origin: Vec) -> Vec:
     """Point at `distance` from `origin` towards (azimuth from +x to +z, elevation), degrees."""
     az, el = math.radians(azimuth_deg), math.radians(elevation_deg)
