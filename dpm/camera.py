@@ -49,12 +49,12 @@ class Camera:
         )
 
     def footprint(self, position: np.ndarray) -> np.ndarray:
-        """(N,) float32 width of a pixel (scene units) at points (N, 3) seen straight from
+        """(N,) float64 width of a pixel (scene units) at points (N, 3) seen straight from
         the camera: its angular width times the distance (a mirror or lens on the way is
         ignored)."""
         angle = 2 * math.tan(math.radians(self.fov) / 2) / self.width
         distance = np.linalg.norm(np.asarray(position, np.float64) - self.origin, axis=1)
-        return (angle * distance).astype(np.float32)
+        return angle * distance
 
 
 def make_camera(

@@ -139,9 +139,7 @@ def footprint_radius(points: VisiblePoints, camera: Camera) -> np.ndarray:
     """(pixels,) float64 initial radius per pixel: RADIUS_FOOTPRINTS pixel widths at the
     distance of its first visible point (straight from the camera; pixels that see nothing
     get the median), so the kernel starts as wide as a few pixels wherever it is seen."""
-    pixel_angle = 2 * np.tan(np.radians(camera.fov) / 2) / camera.width
-    distance = np.linalg.norm(points.position.astype(np.float64) - camera.origin, axis=1)
-    radius = RADIUS_FOOTPRINTS * pixel_angle * distance
+    radius = RADIUS_FOOTPRINTS * camera.footprint(points.position)
     seen = points.hit & (radius > 0)
     fill = np.median(radius[seen]) if seen.any() else 1.0
     return np.where(seen, radius, fill)

@@ -241,7 +241,7 @@ def trace_visible_points(
         bvh.arrays, bvh.depth, scene.kernel_arrays(), camera.basis(), camera.width,
         camera.height, row0, row1, spp, seed, spawn_offset(scene), *vec, hit, pixel, sample,
     )  # fmt: skip
-    footprint = np.where(hit, camera.footprint(vec[0]), np.float32(0))
+    footprint = np.where(hit, camera.footprint(vec[0]), 0.0).astype(np.float32)
     return VisiblePoints(*vec, hit, pixel, sample, footprint)
 
 
