@@ -84,6 +84,7 @@ RADIUS_REDUCTION = 0.96  # LuxCore's default
 NORMAL_ANGLE = 10.0  # degrees, LuxCore's default
 POLL = 0.02  # seconds between checks of a running render
 STOP_RESERVE = 0.3  # seconds kept for stopping, reading the film and writing the output
+GUIDE_OUTPUTS = ("RGB", "ALBEDO", "AVG_SHADING_NORMAL")  # film outputs read with guides
 
 LOG: deque[str] = deque(maxlen=400)  # LuxCore's latest log lines
 _initialised = False
@@ -306,11 +307,15 @@ def render_in_process(
     caustic_radius: float | None = None,
     deadline: float | None = None,
     properties: dict[str, object] | None = None,
+    guides: bool = False,
 ) -> tuple[np.ndarray, dict]:
-    """LuxCore render in this process: ((H, W, 3) float32 linear RGB radiance, stats).
+    """LuxCore render in this process: ((H, W, 3) float32 linear RGB radiance, stats); with
+    `guides`, (H, W, 9): radiance, albedo and average shading normal (the denoiser's inputs).
 
     It stops at `spp` samples per pixel or by `deadline` (a `time.monotonic()` value),
-    whichever comes first; the start (the caustic cache's first build) cannot be cut short.
+    whichever comes first, but not before one sample per pixel (as a time-boxed Mitsuba
+    render takes at least one batch: a black image is no render); the start (the caustic
+    cache's first build) cannot be cut short, so a short deadline is overrun.
     The caustic cache is used only where the scene has a mirror or dielectric. `properties`
     override or add LuxCore render settings. Importing pyluxcore swaps the process's malloc
     for TBB's, after which loading many extension modules (SciPy, Numba, JAX, Dr.Jit,
@@ -324,6 +329,12 @@ def render_in_process(
     caustics = caustics and has_specular(scene)
     lc = load_pyluxcore()
     config = config_properties(camera, seed, spp, caustics, threads, caustic_radius)
+    if guides:
+        config |= {
+            f"film.outputs.{i}.{key}": value
+            for i, kind in enumerate(GUIDE_OUTPUTS)
+            for key, value in (("type", kind), ("filename", f"{kind}.exr"))
+        }
     config |= properties or {}
     render_config = lc.RenderConfig(_properties(lc, config), luxcore_scene(scene, camera))
     session = lc.RenderSession(render_config)
@@ -336,7 +347,8 @@ def render_in_process(
     try:
         while not session.HasDone() and (spp is None or clock.samples < spp * w * h):
             now = time.monotonic()
-            if now + POLL >= stop_at or (every and clock.must_stop(now, stop_at)):
+            late = now + POLL >= stop_at or (every and clock.must_stop(now, stop_at))
+            if late and clock.samples >= w * h:
                 break
             time.sleep(POLL)
             session.UpdateStats()
@@ -345,9 +357,12 @@ def render_in_process(
     finally:
         session.Stop()
     stopped = time.monotonic()
-    film = np.zeros((h, w, 3), np.float32)
-    session.GetFilm().GetOutputFloat(lc.FilmOutputType.RGB, film)
-    image = np.ascontiguousarray(film[::-1])  # film rows run bottom-up
+    planes = []
+    for kind in GUIDE_OUTPUTS if guides else GUIDE_OUTPUTS[:1]:
+        film = np.zeros((h, w, 3), np.float32)
+        session.GetFilm().GetOutputFloat(getattr(lc.FilmOutputType, kind), film)
+        planes.append(film[::-1])  # film rows run bottom-up
+    image = np.ascontiguousarray(np.concatenate(planes, axis=-1))
     samples = _stat(session.GetStats(), "stats.renderengine.total.samplecount")
     stats = {
         "renderer": f"LuxCoreRender {lc.Version()} PATHCPU"
@@ -418,12 +433,20 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--threads", type=int, help="render threads (default: one per CPU)")
     p.add_argument("--no-caustic-cache", action="store_true", help="plain PATHCPU")
     p.add_argument("--caustic-radius", type=float, help="initial lookup radius (scene units)")
+    p.add_argument("--denoised", type=Path, help="also write the OIDN-denoised image here")
+    p.add_argument(
+        "--reserve",
+        type=float,
+        default=STOP_RESERVE,
+        help="seconds of --time kept for the end (stop, denoise, write, exit)",
+    )
     p.add_argument("--job", type=Path, help=argparse.SUPPRESS)  # render_luxcore's child
     args = p.parse_args(argv)
     if args.job is None and (args.scene is None or (args.time is None and args.spp is None)):
         p.error("give a scene and --time and/or --spp")
     try:
         # Before pyluxcore, which swaps malloc: see render_in_process.
+        from dpm.denoise import denoise
         from dpm.io import write_image
         from dpm.scene import load_scene
 
@@ -436,13 +459,21 @@ def main(argv: list[str] | None = None) -> int:
                 "scene": scene, "camera": scene.camera.with_resolution(args.width, args.height),
                 "spp": args.spp, "seed": args.seed, "caustics": not args.no_caustic_cache,
                 "threads": args.threads, "caustic_radius": args.caustic_radius,
-                "deadline": None if args.time is None else started + args.time - STOP_RESERVE,
+                "deadline": None if args.time is None else started + args.time - args.reserve,
+                "guides": args.denoised is not None,
             }  # fmt: skip
         image, stats = render_in_process(**job)
-        if args.output.suffix.lower() == ".npy":
-            np.save(args.output, image)
-        else:
-            write_image(args.output, image)
+        stats["seconds_rendered"] = time.monotonic() - started
+        outputs = [(args.output, image[..., :3])]
+        if args.denoised is not None:
+            outputs.append(
+                (args.denoised, denoise(image[..., :3], image[..., 3:6], image[..., 6:]))
+            )
+        for path, picture in outputs:
+            if path.suffix.lower() == ".npy":
+                np.save(path, picture)
+            else:
+                write_image(path, picture)
     except InputError as exc:
         print(f"{p.prog}: error: {exc}", file=sys.stderr)
         return 2
