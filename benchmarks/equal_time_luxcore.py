@@ -38,10 +38,11 @@ from pathlib import Path
 
 import numpy as np
 from equal_time import dpm_run
-from equal_time_unseen import load, reference_file, summary
+from equal_time_unseen import corrected_ratio, corrected_summary, load, reference_file, summary
 
 sys.path.insert(0, str(Path(__file__).parent / "scenes"))
 from make_unseen import CONTROLS, UNSEEN, unseen_scenes  # noqa: E402
+from unseen_references import OUT as REFERENCES  # noqa: E402
 
 from common import RESULTS, cpu, markdown_table, save_records  # noqa: E402
 from dpm import load_scene  # noqa: E402
@@ -115,13 +116,27 @@ def run_scene(name: str, times: list[float]) -> dict:
     }  # fmt: skip
 
 
+def with_noise(record: dict) -> dict:
+    """The record with its reference's noise (`reference_noise_rgb`, from the reference's
+    JSON) and each row's best LuxCore RMSE (`best`)."""
+    noise = json.loads((REFERENCES / record["reference"]).with_suffix(".json").read_text())
+    rows = [{**x, "best": min(x["luxcore_plain_rmse"], x["luxcore_oidn_rmse"])}
+            for x in record["rows"]]  # fmt: skip
+    return {**record, "reference_noise_rgb": noise["noise_rgb"], "rows": rows}
+
+
 def report(records: list[dict]) -> str:
     """The Markdown report: a table per group (caustic scenes, controls) and their summaries."""
+    records = [with_noise(r) for r in records]
     order = {name: i for i, name in enumerate(UNSEEN)}
     records = sorted(records, key=lambda r: order.get(r["scene"], len(order)))
     head = ["scene", "W x H", "budget s", "dpm wall s", "passes", "dpm RMSE", "LuxCore spp",
             "LuxCore wall s", "LuxCore plain RMSE", "LuxCore OIDN RMSE",
-            "dpm / LuxCore best"]  # fmt: skip
+            "dpm / LuxCore best", "noise-corrected"]  # fmt: skip
+
+    def corrected(r: dict, x: dict) -> str:
+        q = corrected_ratio(r, x, "dpm_rmse", "best")
+        return f"{q:.2f}" if np.isfinite(q) else "below noise"
 
     def table(group: list[dict]) -> list[str]:
         rows = [
@@ -130,7 +145,7 @@ def report(records: list[dict]) -> str:
              f"{x['luxcore_s']:.2f}" + (" (late)" if x["luxcore_s"] > OVERRUN * x["dpm_s"]
                                          else ""),
              f"{x['luxcore_plain_rmse']:.4f}", f"{x['luxcore_oidn_rmse']:.4f}",
-             f"{x['ratio']:.2f}"]
+             f"{x['ratio']:.2f}", corrected(r, x)]
             for r in group for x in r["rows"]
         ]  # fmt: skip
         return markdown_table(head, rows)
@@ -160,15 +175,20 @@ def report(records: list[dict]) -> str:
         "",
         *table(caustic),
         "",
-        "Caustic scenes: " + summary(caustic),
+        "Caustic scenes: " + summary(caustic, "LuxCore"),
         "",
-        "Caustic scenes, rows where LuxCore was on time: " + summary(on_time(caustic)),
+        "Caustic scenes, rows where LuxCore was on time: " + summary(on_time(caustic), "LuxCore"),
+        "",
+        "Noise-corrected (each side's RMSE² less the reference's noise², as in",
+        "`equal_time_unseen.md`): " + corrected_summary(caustic),
         "",
         "## Diffuse-only controls",
         "",
         *table(controls),
         "",
-        "Controls: " + summary(controls),
+        "Controls: " + summary(controls, "LuxCore"),
+        "",
+        "Controls, noise-corrected: " + corrected_summary(controls),
         "",
         *[f"- {r['scene']}: load average {r['load_start']} at the start, {r['load_end']} at "
           "the end" for r in records],

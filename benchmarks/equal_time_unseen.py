@@ -232,14 +232,14 @@ def corrected_summary(records: list[dict], ours: str = "dpm_rmse", theirs: str =
             f"rows below it left out); {int((told > 1.0).sum())} of them above 1.0.")  # fmt: skip
 
 
-def summary(records: list[dict]) -> str:
+def summary(records: list[dict], peer: str = "Mitsuba") -> str:
     """One line: geometric mean, worst row and rows above 1.0 of the records' ratios."""
     rows = [(r["scene"], x["budget"], x["ratio"]) for r in records for x in r["rows"]]
     if not rows:
         return "no rows."
     ratios = np.array([ratio for *_, ratio in rows])
     worst = rows[int(np.argmax(ratios))]
-    return (f"geometric mean of dpm / Mitsuba best {float(np.exp(np.mean(np.log(ratios)))):.2f}"
+    return (f"geometric mean of dpm / {peer} best {float(np.exp(np.mean(np.log(ratios)))):.2f}"
             f" over {len(rows)} rows; worst {worst[2]:.2f} ({worst[0]} at {worst[1]:g} s); "
             f"{int((ratios > 1.0).sum())} of {len(rows)} rows above 1.0.")  # fmt: skip
 
