@@ -18,13 +18,13 @@ from dpm import __version__
 from dpm.clock import process_started
 from dpm.errors import InputError
 from dpm.io import write_image, write_json
+from dpm.methods import METHODS, method_class, scoped_users
 from dpm.options import (
     COMPONENTS,
     RenderOptions,
     cli_fields,
     default_text,
     flag,
-    scoped_users,
 )
 from dpm.render import render
 from dpm.scene import load_scene
@@ -61,8 +61,6 @@ def _run(prog: str, body: Callable[[], None]) -> int:
 
 def _render_parser() -> _Parser:
     """dpm-render's parser: the outputs, then one flag per RenderOptions field."""
-    from dpm.methods import METHODS  # the registry names the methods
-
     p = _Parser(
         prog="dpm-render",
         description="Render an OBJ scene (with its MTL and optional TOML sidecar). Flags "
@@ -122,7 +120,7 @@ def render_options(args: argparse.Namespace, sidecar: dict) -> RenderOptions:
     the methods that read it), while such a flag is an error (`validate`)."""
     options = RenderOptions()
     options.method = args.method or sidecar.get("method", options.method)
-    users = options.method_class().options
+    users = method_class(options.method).options
     flags = cli_fields()
     # e.g. a weight file knows its K: --weights sets aside the sidecar's k
     aside = {

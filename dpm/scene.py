@@ -1,6 +1,6 @@
 """Scenes: loading OBJ + MTL + TOML sidecar into flat float32 arrays, with validation.
 
-See DESIGN.md "Scene format". Material kinds: DIFFUSE (two-sided Lambertian), MIRROR (two-sided
+See docs/design.md "Scene format". Material kinds: DIFFUSE (two-sided Lambertian), MIRROR (two-sided
 perfect mirror with reflectance Ks), DIELECTRIC (smooth, IOR Ni inside, air on the front side).
 Any material with non-zero Ke is also a one-sided Lambertian emitter (front face).
 """

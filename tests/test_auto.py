@@ -21,7 +21,7 @@ from conftest import (
 )
 from dpm import load_scene
 from dpm.denoise import RESTORE_Z, restore_certain
-from dpm.density.ppm import PPMState
+from dpm.estimators.ppm import PPMState
 from dpm.io import KNEE, linear_to_srgb8, tone_map
 from dpm.methods import auto
 from dpm.render import RenderOptions, render

@@ -9,13 +9,14 @@ import numpy as np
 import pytest
 
 from dpm import load_scene, stopwatch
-from dpm.density import APPM, PM, PPM, gather
+from dpm.density import gather
 from dpm.density.progressive import run_passes
-from dpm.density.reference import ppm_reference
-from dpm.density.tuning import best, rescore, tune_widening
 from dpm.errors import InputError
-from dpm.methods.cppm import CPPM
-from dpm.methods.sppm import sppm_caustics
+from dpm.estimators import APPM, PM, PPM
+from dpm.estimators.cppm import CPPM
+from dpm.estimators.reference import ppm_reference
+from dpm.estimators.sppm import sppm_caustics
+from dpm.estimators.tuning import best, rescore, tune_widening
 from dpm.metrics import rmse
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap, VisiblePoints, build_bvh, trace_photons, trace_visible_points

@@ -12,9 +12,9 @@ import numpy as np
 
 from dpm import load_scene
 from dpm.cli import render_main
+from dpm.estimators.dpm import DPM
 from dpm.io import read_exr
 from dpm.metrics import rmse
-from dpm.nn.estimator import DPM
 from dpm.nn.model import make_model
 from dpm.nn.train import init_params
 from dpm.nn.weights import Weights, save_weights

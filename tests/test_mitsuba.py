@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from dpm import load_scene
-from dpm.density import PPM
 from dpm.density.progressive import run_passes
+from dpm.estimators import PPM
 from dpm.render import RenderOptions, render
 from dpm.tracer import build_bvh, trace_visible_points
 from dpm.validation.mitsuba import render_mitsuba

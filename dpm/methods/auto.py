@@ -44,12 +44,12 @@ from tqdm import tqdm
 from dpm.camera import Camera
 from dpm.denoise import denoise, guides, restore_certain
 from dpm.density.base import luminance
-from dpm.density.ppm import ALPHA, PPMState, check_progressive
 from dpm.density.progressive import pass_seed
 from dpm.errors import InputError
+from dpm.estimators.ppm import ALPHA, PPMState, check_progressive
+from dpm.estimators.sppm import sppm_gather
 from dpm.methods.adaptive import ADAPT_AFTER, EXTRA_CAP, EXTRA_PER_PIXEL, Halves
 from dpm.methods.base import Method, check_photons
-from dpm.methods.sppm import sppm_gather
 from dpm.options import RenderOptions
 from dpm.scene import DIFFUSE, Scene
 from dpm.stopwatch import Stopwatch
@@ -219,7 +219,7 @@ class Auto(Method):
         extra_paths = 0
         albedo, normal = np.zeros((pixels, 3), np.float64), np.zeros((pixels, 3), np.float64)
         deadline = None if o.time is None else started + o.time
-        finish = FINISH_SECONDS + FINISH_SECONDS_PER_PIXEL * pixels * (full and o.denoised)
+        finish = FINISH_SECONDS + FINISH_SECONDS_PER_PIXEL * pixels * (full and self.denoises(o))
         # Photon paths per pass: without a budget, --photons shared by the --spp passes; with
         # one, --photons-per-pass or the plan's (the first pass already uses it, so a --time
         # render of N passes of P paths is the render with --spp N --photons N·P).
@@ -361,7 +361,7 @@ class Auto(Method):
         # known well enough as it is (not where one sample per half tells no error: inf)
         after = (error < SEEN_ERROR * luminance(seen))[:, None]
         image = (paths.mean() + np.where(after, 0, seen)).astype(np.float32).reshape(h, w, 3)
-        if o.denoised:
+        if self.denoises(o):
             with watch("denoise"):
                 guide = (albedo / j).reshape(h, w, 3), (normal / j).reshape(h, w, 3)
                 total = np.hypot(paths.standard_error(), np.where(after[:, 0], 0, error))
