@@ -197,6 +197,41 @@ def run_scene(name: str, times: list[float], variant: str, batch_spp: int = BATC
     }  # fmt: skip
 
 
+def own_error(rmse_value: float, noise: float) -> float:
+    """The RMSE against the truth a render has, from its RMSE against a reference whose own
+    expected RMSE is `noise`: E[MSE(x, ref)] = MSE(x, truth) + noise² when the reference's
+    noise is independent of x (noise² = mean((A - B)²) / 4 of its two halves, unbiased).
+    NaN where the difference is not positive: the render is as close to the truth as the
+    reference can tell."""
+    excess = rmse_value**2 - noise**2
+    return float(np.sqrt(excess)) if excess > 0 else float("nan")
+
+
+def corrected_ratio(record: dict, row: dict, ours: str, theirs: str) -> float:
+    """Ratio of the two sides' own errors (`own_error`, the record's reference noise); NaN
+    where either side is below the reference's noise."""
+    noise = record["reference_noise_rgb"]
+    return own_error(row[ours], noise) / own_error(row[theirs], noise)
+
+
+def corrected_summary(records: list[dict], ours: str = "dpm_rmse", theirs: str = "best") -> str:
+    """One line: the geometric mean of the noise-corrected ratios over the rows where both
+    sides' errors exceed the reference's noise, and how many rows could not be told."""
+    ratios = []
+    for r in records:
+        for x in r["rows"]:
+            other = (
+                x[theirs] if theirs in x else min(x["mitsuba_plain_rmse"], x["mitsuba_oidn_rmse"])
+            )
+            ratios.append(corrected_ratio(r, {**x, "best": other}, ours, "best"))
+    told = np.array([q for q in ratios if np.isfinite(q)])
+    if not len(told):
+        return "no row above the reference's noise."
+    return (f"geometric mean {float(np.exp(np.mean(np.log(told)))):.2f} over the {len(told)} "
+            f"rows where both errors exceed the reference's noise ({len(ratios) - len(told)} "
+            f"rows below it left out); {int((told > 1.0).sum())} of them above 1.0.")  # fmt: skip
+
+
 def summary(records: list[dict]) -> str:
     """One line: geometric mean, worst row and rows above 1.0 of the records' ratios."""
     rows = [(r["scene"], x["budget"], x["ratio"]) for r in records for x in r["rows"]]
@@ -215,14 +250,19 @@ def report(records: list[dict]) -> str:
     records = sorted(records, key=lambda r: order.get(r["scene"], len(order)))
     head = ["scene", "W x H", "budget s", "dpm wall s", "passes", "dpm RMSE", "Mitsuba spp",
             "Mitsuba wall s", "Mitsuba plain RMSE", "Mitsuba OIDN RMSE",
-            "dpm / Mitsuba best"]  # fmt: skip
+            "dpm / Mitsuba best", "noise-corrected"]  # fmt: skip
+
+    def corrected(r: dict, x: dict) -> str:
+        best = min(x["mitsuba_plain_rmse"], x["mitsuba_oidn_rmse"])
+        q = corrected_ratio(r, {**x, "best": best}, "dpm_rmse", "best")
+        return f"{q:.2f}" if np.isfinite(q) else "below noise"
 
     def table(group: list[dict]) -> list[str]:
         rows = [
             [r["scene"], r["size"], f"{x['budget']:g}", f"{x['dpm_s']:.2f}", str(x["passes"]),
              f"{x['dpm_rmse']:.4f}", str(x["mitsuba_spp"]), f"{x['mitsuba_s']:.2f}",
              f"{x['mitsuba_plain_rmse']:.4f}", f"{x['mitsuba_oidn_rmse']:.4f}",
-             f"{x['ratio']:.2f}"]
+             f"{x['ratio']:.2f}", corrected(r, x)]
             for r in group for x in r["rows"]
         ]  # fmt: skip
         return markdown_table(head, rows)
@@ -257,17 +297,25 @@ def report(records: list[dict]) -> str:
         "",
         "Caustic scenes: " + summary(caustic),
         "",
+        "Noise-corrected (each side's RMSE² less the reference's noise², `own_error`): "
+        + corrected_summary(caustic),
+        "",
         "## Diffuse-only controls",
         "",
         *table(controls),
         "",
         "Controls: " + summary(controls),
         "",
+        "Controls, noise-corrected: " + corrected_summary(controls),
+        "",
         f"Mitsuba's wall time vs dpm's: off by {100 * np.median(walls):.1f} % (median), "
         f"{100 * max(walls):.1f} % at most." if walls else "",
         "",
         "The reference's own expected RMSE (`noise_rgb`: RMSE(A, B) / 2 of its halves) is part",
-        "of both sides' RMSE (in quadrature), so RMSEs near it say little:",
+        "of both sides' RMSE (in quadrature: E[RMSE²] = own error² + noise²), so a ratio of RMSEs",
+        "near it is pulled towards 1. The noise-corrected column is the ratio of the two sides'",
+        "own errors, sqrt(RMSE² - noise²), where both exceed the noise; an unbiased estimate of",
+        "each MSE, though noisy where the reference's error is heavy-tailed (fireflies).",
         *per_scene,
         "",
         *[f"![{r['scene']}: dpm, Mitsuba 3 best, reference at {r['picture_budget']:g} s]"
