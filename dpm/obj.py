@@ -111,9 +111,12 @@ def read_obj(path: Path) -> ObjMesh:
             if len(words) < 4:
                 raise InputError(f"{path}:{lineno}: vertex needs 3 coordinates")
             try:
-                vertices.append([float(w) for w in words[1:4]])
+                vertex = [float(w) for w in words[1:4]]
             except ValueError:
                 raise InputError(f"{path}:{lineno}: vertex coordinate is not a number") from None
+            if not all(math.isfinite(x) for x in vertex):
+                raise InputError(f"{path}:{lineno}: vertex coordinate is NaN or infinite")
+            vertices.append(vertex)
         elif key == "f":
             if len(words) < 4:
                 raise InputError(f"{path}:{lineno}: face needs at least 3 vertices")

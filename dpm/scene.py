@@ -258,16 +258,16 @@ def load_scene(path: str | Path) -> Scene:
     materials = _material_table(names, library, path)
 
     tri64 = mesh.vertices[mesh.faces]  # (T, 3, 3)
-    with np.errstate(invalid="ignore", over="ignore"):  # NaN/inf triangles are dropped below
+    with np.errstate(invalid="ignore", over="ignore"):  # beyond float32: dropped below
         tri = tri64.astype(np.float32)
         keep, cross, double_area = _valid_triangles(tri, tri64)
     if not keep.all():
         warnings.warn(
-            f"{path}: dropped {np.count_nonzero(~keep)} degenerate, NaN or infinite triangle(s)",
+            f"{path}: dropped {np.count_nonzero(~keep)} degenerate or out-of-range triangle(s)",
             stacklevel=2,
         )
     if not keep.any():
-        raise InputError(f"{path}: no valid triangles left (all degenerate, NaN or infinite)")
+        raise InputError(f"{path}: no valid triangles left (all degenerate or out of range)")
     tri, cross, double_area = tri[keep], cross[keep], double_area[keep]
     material = face_material[keep].astype(np.int32)
     normals = (cross / double_area[:, None]).astype(np.float32)

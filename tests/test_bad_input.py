@@ -78,7 +78,9 @@ CASES = {
     "lights face away": (FLOOR_AND_LIGHT_OBJ.replace("f 5 6 7 8", "f 5 8 7 6"), None, None, "away"),
     "camera inside an object": (_closed_box_obj(), None, CAMERA_IN_BOX, "inside a closed object"),
     "empty scene": ("mtllib scene.mtl\nv 0 0 0\n", None, None, "no faces"),
-    "only NaN triangles": ("v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", None, None, "no valid"),
+    "a NaN vertex": ("v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", None, None, "NaN or infinite"),
+    "an infinite vertex": ("v 0 0 0\nv 1 0 0\nv 0 -inf 0\nf 1 2 3\n", None, None, "NaN or inf"),
+    "only degenerate triangles": ("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", None, None, "no valid"),
 }
 
 
@@ -151,14 +153,14 @@ def test_bad_output_paths(scene_path: Path, capsys) -> None:
 
 
 def test_dropped_triangles_warn_in_one_line(tmp_path: Path, capsys) -> None:
-    obj = FLOOR_AND_LIGHT_OBJ + "v nan 0 0\nf 1 2 9\n"
+    obj = FLOOR_AND_LIGHT_OBJ + "v 2 0 0\nf 1 1 9\n"  # a triangle with no area
     path = write_scene(tmp_path, obj)
     code, err = run_render(
         capsys, [str(path), "-o", str(tmp_path / "o.png"), "--quiet", "--spp", "1"]
     )
     assert code == 0
     assert err.strip() == (
-        f"dpm-render: warning: {path}: dropped 1 degenerate, NaN or infinite triangle(s)"
+        f"dpm-render: warning: {path}: dropped 1 degenerate or out-of-range triangle(s)"
     )
 
 

@@ -24,7 +24,7 @@ LAYERS = {
            "dpm.nn.shape_net", "dpm.nn.weights"),
     "estimators": ("dpm.estimators",),
     "methods": ("dpm.denoise", "dpm.methods"),
-    "render": ("dpm.render",),
+    "render": ("dpm.renderer",),
     "training": ("dpm.data", "dpm.nn.config", "dpm.nn.losses", "dpm.nn.run_folder",
                  "dpm.nn.sampler", "dpm.nn.shape_training", "dpm.nn.sharding", "dpm.nn.train"),
     "validation": ("dpm.validation",),

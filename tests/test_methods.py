@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
@@ -16,7 +18,7 @@ from dpm.cli import render_main
 from dpm.estimators import PM
 from dpm.methods import METHODS, caustic_methods, make_estimator, method_class, register
 from dpm.options import RenderOptions, cli_fields, sidecar_types
-from dpm.render import render
+from dpm.renderer import render
 
 EGG = Path(__file__).parent.parent / "examples" / "scenes" / "glass_egg.obj"
 K = 8
@@ -133,7 +135,7 @@ def test_an_unwritable_output_is_refused_before_the_render(
     def no_render(*args, **kwargs):
         raise AssertionError("rendered before checking the outputs")
 
-    monkeypatch.setattr("dpm.cli.render", no_render)
+    monkeypatch.setattr("dpm.renderer.render", no_render)
     folder = scene_path.parent
     (folder / "taken.png").mkdir()
     for target, expected in (
@@ -161,3 +163,14 @@ def test_make_estimator_builds_each_methods_estimator(name: str) -> None:
         params["k"] = 50  # a shipped model
     estimator = make_estimator(name, **params)
     assert callable(estimator.estimate)
+
+
+def test_version_answers_without_importing_the_renderer() -> None:
+    """`dpm-render --version` loads neither Numba, SciPy nor JAX (start-up time)."""
+    code = (
+        "import sys; from dpm.cli import render_main; assert render_main(['--version']) == 0; "
+        "print(sorted(m for m in ('numba', 'scipy', 'jax', 'dpm.tracer') if m in sys.modules))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines() == [f"dpm-render {__version__}", "[]"]

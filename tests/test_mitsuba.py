@@ -15,7 +15,7 @@ import pytest
 from dpm import load_scene
 from dpm.density.progressive import run_passes
 from dpm.estimators import PPM
-from dpm.render import RenderOptions, render
+from dpm.renderer import RenderOptions, render
 from dpm.tracer import build_bvh, trace_visible_points
 from dpm.validation.mitsuba import render_mitsuba
 from dpm.validation.noise import block_z, relative_sigma_of_mean_difference

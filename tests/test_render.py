@@ -16,7 +16,7 @@ from dpm.denoise import guides
 from dpm.density.base import luminance
 from dpm.estimators import PM
 from dpm.io import read_exr
-from dpm.render import RenderOptions, render
+from dpm.renderer import RenderOptions, render
 from dpm.tracer import (
     build_bvh,
     shade,

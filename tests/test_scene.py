@@ -137,14 +137,16 @@ def test_default_camera_sees_the_whole_scene(scene_path: Path) -> None:
     assert np.all(np.abs(x) <= 1) and np.all(np.abs(y) <= 1)
 
 
-def test_degenerate_nan_and_inf_triangles_are_dropped_with_a_warning(tmp_path: Path) -> None:
+def test_degenerate_and_out_of_range_triangles_are_dropped_with_a_warning(
+    tmp_path: Path,
+) -> None:
     obj = """\
 mtllib scene.mtl
 v -1 0 -1
 v 1 0 -1
 v 1 0 1
-v nan 0 0
-v inf 0 0
+v 0 0 -1
+v 1e300 0 0
 v 2 0 -1
 v -1 1 -1
 v 1 1 1
@@ -157,7 +159,7 @@ f 1 5 2
 usemtl light
 f 7 9 8
 """
-    with pytest.warns(UserWarning, match="dropped 3 degenerate"):
+    with pytest.warns(UserWarning, match="dropped 3 degenerate or out-of-range"):
         scene = load_scene(write_scene(tmp_path, obj))
     assert len(scene.triangles) == 2
     assert np.all(np.isfinite(scene.triangles))

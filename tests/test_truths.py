@@ -24,7 +24,7 @@ from dpm import load_scene
 from dpm.camera import Camera
 from dpm.data import builder
 from dpm.methods import caustic_methods, method_class
-from dpm.render import RenderOptions, render
+from dpm.renderer import RenderOptions, render
 from dpm.scene import Scene
 
 CAUSTIC_METHODS = caustic_methods()  # every registered method with a caustic component

@@ -30,7 +30,7 @@ METHODS: dict[str, type[Method]] = {}
 
 __all__ = [
     "METHODS", "Method", "caustic_methods", "make_estimator", "method_class", "register",
-    "scoped_users", "validate",
+    "options_from", "scoped_users", "validate",
 ]  # fmt: skip
 
 
@@ -95,3 +95,25 @@ def validate(options: RenderOptions) -> None:
         if value is not None and not 1 <= value <= 16384:
             raise InputError(f"{flag(name)} must be from 1 to 16384")
     cls.check(options)
+
+
+def options_from(defaults: dict[str, Any], given: dict[str, Any]) -> RenderOptions:
+    """RenderOptions from `given` values (flags, keyword arguments) over a scene's `[render]`
+    `defaults`. A default of a scoped option that the chosen method does not read is passed
+    over (it is a default for the methods that read it), while such a given value is an
+    error (`validate`); a given option that supersedes others (--weights: the file knows its
+    K) sets their defaults aside."""
+    fields = {f.name: f for f in cli_fields()}
+    unknown = sorted(set(given) - set(fields))
+    if unknown:
+        raise InputError(f"unknown render option(s) {', '.join(unknown)}")
+    options = RenderOptions()
+    options.method = given.get("method") or defaults.get("method", options.method)
+    users = method_class(options.method).options
+    aside = {n for name in given for n in fields[name].metadata["supersedes"]}
+    for name, f in fields.items():
+        if name in defaults and name not in aside and (not f.metadata["scoped"] or name in users):
+            setattr(options, name, defaults[name])
+        if given.get(name) is not None:
+            setattr(options, name, given[name])
+    return options

@@ -145,7 +145,7 @@ def side_by_side(path: Path, output: Path, spp: int) -> None:
 
     from dpm import load_scene
     from dpm.io import linear_to_srgb8
-    from dpm.render import RenderOptions, render
+    from dpm.renderer import RenderOptions, render
 
     load_mitsuba()  # before the dpm render: a missing Mitsuba fails at once
     scene = load_scene(path)
