@@ -30,10 +30,17 @@ __version__ = "0.1.0"
 
 
 def load_file(path: str | Path, **overrides: Any) -> Scene:
-    """The scene of an OBJ file (with its MTL and optional TOML sidecar); `overrides` replace
-    the sidecar's `[render]` values (method, spp, width, height, photons, ...), which are the
-    defaults of `render` for this scene. InputError for a bad file or an unknown key."""
-    scene = load_scene(Path(path))
+    """The scene of an OBJ file (with its MTL and optional TOML sidecar) or of a Mitsuba 3 XML
+    file (`dpm.mitsuba_xml`: the subset it reads); `overrides` replace the sidecar's
+    `[render]` values (method, spp, width, height, photons, ...), which are the defaults of
+    `render` for this scene. InputError for a bad file or an unknown key."""
+    path = Path(path)
+    if path.suffix.lower() == ".xml":
+        from dpm.mitsuba_xml import read_xml
+
+        scene = read_xml(path)
+    else:
+        scene = load_scene(path)
     kinds = sidecar_types()
     for key, value in overrides.items():
         if key not in kinds:

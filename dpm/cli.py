@@ -60,11 +60,11 @@ def _render_parser() -> _Parser:
 
     p = _Parser(
         prog="dpm-render",
-        description="Render an OBJ scene (with its MTL and optional TOML sidecar). Flags "
-        "override the sidecar's [render] table.",
+        description="Render an OBJ scene (with its MTL and optional TOML sidecar) or a Mitsuba 3 "
+        "XML scene. Flags override the sidecar's [render] table.",
         epilog="methods: " + "; ".join(f"{n}: {c.summary}" for n, c in METHODS.items()),
     )
-    p.add_argument("scene", type=Path, help="scene .obj file")
+    p.add_argument("scene", type=Path, help="scene .obj (or Mitsuba 3 .xml) file")
     p.add_argument(
         "-o", "--output", type=Path, action="append",
         help="image to write: .exr (linear) or .png (sRGB); repeat for both "
@@ -154,9 +154,9 @@ def render_main(argv: Sequence[str] | None = None) -> int:
     args = _render_parser().parse_args(argv)
 
     def body() -> None:
+        from dpm import load_file
         from dpm.io import write_image, write_json
         from dpm.renderer import render
-        from dpm.scene import load_scene
         from dpm.stopwatch import Stopwatch
 
         outputs = args.output or [Path(args.scene.stem + e) for e in (".exr", ".png")]
@@ -171,7 +171,7 @@ def render_main(argv: Sequence[str] | None = None) -> int:
         started = process_started()
         watch = Stopwatch()
         with watch("load"):
-            scene = load_scene(args.scene)
+            scene = load_file(args.scene)
         options = render_options(args, scene.render_defaults)
         result = render(scene, options, started)  # validates the options first
         seconds = result.stats["seconds"]

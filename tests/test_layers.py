@@ -17,7 +17,7 @@ ROOT = Path(__file__).parents[1] / "dpm"
 # Lowest first; a module may import its own layer and those below (docs/design.md).
 LAYERS = {
     "core": ("dpm.errors", "dpm.clock", "dpm.stopwatch", "dpm.io", "dpm.metrics", "dpm.camera",
-             "dpm.obj", "dpm.options", "dpm.scene", "dpm.parallel"),
+             "dpm.obj", "dpm.options", "dpm.scene", "dpm.mitsuba_xml", "dpm.parallel"),
     "tracer": ("dpm.tracer",),
     "density": ("dpm.density",),
     "nn": ("dpm.nn", "dpm.nn.features", "dpm.nn.fused", "dpm.nn.infer", "dpm.nn.model",
@@ -43,11 +43,13 @@ def modules() -> dict[str, Path]:
 
 
 def layer(name: str) -> int:
-    """Index in LAYERS of the longest prefix of `name` listed there."""
+    """Index in LAYERS of the longest prefix of `name` listed there (the package `dpm` itself
+    is no prefix: each module is placed)."""
     best, found = -1, None
     for i, prefixes in enumerate(LAYERS.values()):
         for prefix in prefixes:
-            if (name == prefix or name.startswith(prefix + ".")) and len(prefix) > best:
+            within = name.startswith(prefix + ".") and prefix != "dpm"
+            if (name == prefix or within) and len(prefix) > best:
                 best, found = len(prefix), i
     assert found is not None, f"{name} is in no layer of LAYERS"
     return found
