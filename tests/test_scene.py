@@ -66,7 +66,13 @@ Ke 4 2 1
 
 
 def test_every_material_kind(tmp_path: Path) -> None:
-    scene = load_scene(write_scene(tmp_path, ALL_KINDS_OBJ, ALL_KINDS_MTL))
+    with pytest.warns(UserWarning) as caught:  # Ns and map_Kd: one line each
+        scene = load_scene(write_scene(tmp_path, ALL_KINDS_OBJ, ALL_KINDS_MTL))
+    assert sorted(str(w.message).split(": ", 1)[1] for w in caught) == [
+        "MTL key 'Ns' ignored",
+        "MTL key 'map_Kd' ignored",
+    ]
+    assert all(str(w.message).startswith(f"{tmp_path / 'scene.mtl'}:") for w in caught)
     m = scene.materials
     by_name = {name: i for i, name in enumerate(m.names)}
     assert len(scene.triangles) == 11  # the quad is split into two triangles
@@ -163,3 +169,9 @@ f 7 9 8
         scene = load_scene(write_scene(tmp_path, obj))
     assert len(scene.triangles) == 2
     assert np.all(np.isfinite(scene.triangles))
+
+
+def test_specular_colour_on_a_diffuse_material_is_one_warning(tmp_path: Path) -> None:
+    mtl = "newmtl floor\nKd 0.5 0.5 0.5\nKs 0.5 0.5 0.5\nillum 2\nnewmtl light\nKe 10 10 10\n"
+    with pytest.warns(UserWarning, match=r"Ks ignored on 1 non-mirror material\(s\) \(floor\)"):
+        load_scene(write_scene(tmp_path, mtl=mtl))
