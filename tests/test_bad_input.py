@@ -183,10 +183,22 @@ EGG = Path(__file__).parent.parent / "examples" / "scenes" / "glass_egg.obj"
 def test_k_above_the_caustic_photon_count_is_one_line(tmp_path: Path, capsys) -> None:
     out = tmp_path / "out.png"
     argv = [str(EGG), "-o", str(out), "--quiet", "--width", "8", "--height", "8"]
-    code, err = run_render(capsys, [*argv, "--method", "pm", "--photons", "2000", "--k", "5000"])
+    code, err = run_render(capsys, [*argv, "--method", "pm", "--photons", "2000", "--k", "1900"])
     assert code == 2 and len(err.strip().splitlines()) == 1
-    assert "--k 5000 is more than the" in err and "caustic photons" in err
+    assert "--k 1900 is more than the" in err and "caustic photons that 2000" in err
     assert not out.exists()
+
+
+def test_k_above_the_emitted_paths_is_one_line_even_without_caustics(
+    scene_path: Path, capsys
+) -> None:
+    out = scene_path.parent / "out.png"
+    for method in ("pm", "dpm", "hybrid"):
+        argv = [str(scene_path), "-o", str(out), "--quiet", "--method", method]
+        code, err = run_render(capsys, [*argv, "--photons", "100", "--k", "500"])
+        assert code == 2 and len(err.strip().splitlines()) == 1, err
+        assert "--k 500 is more than the 100 photon paths emitted" in err
+        assert not out.exists()
 
 
 def test_a_corrupt_or_foreign_checkpoint_is_one_line(tmp_path: Path, capsys) -> None:

@@ -120,6 +120,17 @@ class NearestPhotons(PhotonMethod):
 
     options = frozenset({"k", "caustic_spp"})
 
+    @classmethod
+    def check(cls, options: RenderOptions) -> None:
+        """PhotonMethod's checks, and --k no more than the emitted paths (each deposits at
+        most one caustic photon), whatever the scene (also one without caustics)."""
+        super().check(options)
+        if options.k is not None and options.k > options.photons:
+            raise InputError(
+                f"--k {options.k} is more than the {options.photons} photon paths emitted (each "
+                "gives at most one caustic photon); raise --photons or lower --k"
+            )
+
     def estimator(self) -> Any:
         """The estimator with this render's --k and the options it reads (the estimator's
         own defaults for those not given)."""
