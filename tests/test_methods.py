@@ -71,7 +71,7 @@ def test_a_new_estimator_needs_only_its_class_and_one_registration(monkeypatch, 
     np.testing.assert_allclose(twice.image, 2 * pm.image, rtol=1e-6)
     assert twice.stats["k"] == K and "gather" in twice.stats["seconds"]
     code, out, _ = run(capsys, ["--help"])
-    assert code == 0 and "twice-pm: PM-K doubled (a test estimator)" in out
+    assert code == 0 and "twice-pm: PM-K doubled (a test estimator)" in " ".join(out.split())
 
 
 def test_flags_and_sidecar_keys_come_from_the_options_dataclass(capsys) -> None:

@@ -155,7 +155,7 @@ def test_an_xml_scene_renders_as_its_obj_twin(tmp_path: Path, mesh: str) -> None
 def test_what_is_not_read_is_one_line_and_exit_2(tmp_path, capsys, change, expected) -> None:
     write_box(tmp_path, "obj")
     xml = tmp_path / "scene.xml"
-    xml.write_text(XML.replace("MESH", "obj").replace(*change))
+    xml.write_text(XML.replace(*change).replace("MESH", "obj"))
     code = render_main([str(xml), "-o", str(tmp_path / "o.png"), "--quiet", "--spp", "1"])
     err = capsys.readouterr().err
     assert code == 2 and expected in err and len(err.strip().splitlines()) == 1, err
