@@ -21,7 +21,7 @@ from dpm import load_scene
 from dpm.io import read_exr
 from dpm.methods import auto
 from dpm.metrics import rmse
-from dpm.render import RenderOptions, render
+from dpm.renderer import RenderOptions, render
 
 PHOTONS_PER_PIXEL = (0.25, 1.0, 4.0)
 RADIUS_FOOTPRINTS = (1.0, 2.0, 4.0)

@@ -26,7 +26,7 @@ from common import (
 )
 from dpm import load_scene
 from dpm.density.base import Estimator, luminance
-from dpm.density.reference import caustic_rmse
+from dpm.estimators.reference import caustic_rmse
 from dpm.methods.base import PASSES, NearestPhotons
 from dpm.nn.weights import weight_ks
 from dpm.scene import Scene

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from dpm.density.reference import Reference
+from dpm.estimators.reference import Reference
 from dpm.io import atomic
 from dpm.methods import METHODS
 from dpm.methods.base import Method, NearestPhotons, Progressive

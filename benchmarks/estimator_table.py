@@ -55,9 +55,9 @@ from common import (
     timed_estimate,
 )
 from dpm import load_scene
-from dpm.density import PM
-from dpm.density.reference import Reference, caustic_rmse, ppm_reference
-from dpm.density.tuning import Trial, best, radii, rescore, tune_widening
+from dpm.estimators import PM
+from dpm.estimators.reference import Reference, caustic_rmse, ppm_reference
+from dpm.estimators.tuning import Trial, best, radii, rescore, tune_widening
 from dpm.io import atomic
 from dpm.scene import Scene
 from dpm.tracer import BVH, VisiblePoints, build_bvh, trace_photons

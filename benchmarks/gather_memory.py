@@ -45,7 +45,7 @@ def data():
 
 
 def stage(name: str) -> dict:
-    from dpm.density import PM, PPM
+    from dpm.estimators import PM, PPM
 
     photons, points = data()
     base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024

@@ -39,11 +39,11 @@ from dpm.camera import Camera
 from dpm.denoise import denoise
 from dpm.density.base import luminance
 from dpm.density.progressive import pass_seed
-from dpm.density.reference import ppm_reference
+from dpm.estimators.reference import ppm_reference
 from dpm.io import linear_to_srgb8, read_exr, write_image, write_json
 from dpm.methods.adaptive import Halves
 from dpm.metrics import rmse
-from dpm.render import RenderOptions, render
+from dpm.renderer import RenderOptions, render
 from dpm.scene import Scene
 from dpm.tracer import build_bvh, trace_listed, trace_visible_points
 from dpm.validation.mitsuba import load_mitsuba, mitsuba_scene

@@ -36,9 +36,9 @@ from common import (
     timed_estimate,
 )
 from dpm import load_scene
-from dpm.density import PPM
-from dpm.density.nppm import NPPM
-from dpm.density.reference import caustic_rmse
+from dpm.estimators import PPM
+from dpm.estimators.nppm import NPPM
+from dpm.estimators.reference import caustic_rmse
 from dpm.methods import make_estimator
 from dpm.tracer import build_bvh, trace_photons
 

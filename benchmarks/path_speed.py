@@ -32,7 +32,7 @@ import numpy as np
 from common import RESULTS, SCENES, cpu, markdown_table, timed
 from dpm import load_scene
 from dpm.camera import Camera
-from dpm.render import RenderOptions, render
+from dpm.renderer import RenderOptions, render
 from dpm.scene import Scene
 from dpm.tracer.path import RR_START
 from dpm.validation.mitsuba import mitsuba_scene

@@ -9,7 +9,7 @@ radius without one. Per scene, caustic component, at M and 10·M emitted photon 
 the estimator table's maps), each of ppm, appm and cppm at its defaults (no --radius: each
 point's radius from its photons and pixel footprint, `dpm.density.radius`; photons / 10 per
 pass) against its own best of 30 settings (10 initial radii × 10, 100 and 1000 passes, the
-grid extended at an edge as `dpm.density.tuning.tune_widening` does), and nppm at its
+grid extended at an edge as `dpm.estimators.tuning.tune_widening` does), and nppm at its
 defaults against the best tuned classic.
 
 - examples (the scenes the defaults were chosen on): the estimator table's visible points,
@@ -42,8 +42,8 @@ from make_unseen import unseen_scenes  # noqa: E402
 
 from common import RESULTS, SCENES, M, cpu, load_reference, markdown_table, table_points  # noqa: E402
 from dpm import load_scene  # noqa: E402
-from dpm.density.reference import caustic_rmse, ppm_reference  # noqa: E402
-from dpm.density.tuning import best, tune_widening  # noqa: E402
+from dpm.estimators.reference import caustic_rmse, ppm_reference  # noqa: E402
+from dpm.estimators.tuning import best, tune_widening  # noqa: E402
 from dpm.io import atomic  # noqa: E402
 from dpm.methods import make_estimator  # noqa: E402
 from dpm.scene import Scene  # noqa: E402

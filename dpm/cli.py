@@ -1,6 +1,8 @@
 """Command-line entry points `dpm-render` and `dpm-train`.
 
-Bad input (InputError) becomes one line on stderr and exit status 2, never a traceback.
+Bad input (InputError) becomes one line on stderr and exit status 2, never a traceback. The
+renderer (Numba, SciPy) and the network (JAX) are imported inside the functions that need
+them, so `--version` answers without them.
 """
 
 from __future__ import annotations
@@ -13,22 +15,15 @@ import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from dpm import __version__
 from dpm.clock import process_started
 from dpm.errors import InputError
-from dpm.io import write_image, write_json
-from dpm.options import (
-    COMPONENTS,
-    RenderOptions,
-    cli_fields,
-    default_text,
-    flag,
-    scoped_users,
-)
-from dpm.render import render
-from dpm.scene import load_scene
-from dpm.stopwatch import Stopwatch
+from dpm.options import COMPONENTS, cli_fields, default_text, flag
+
+if TYPE_CHECKING:
+    from dpm.options import RenderOptions
 
 
 class _Parser(argparse.ArgumentParser):
@@ -61,15 +56,15 @@ def _run(prog: str, body: Callable[[], None]) -> int:
 
 def _render_parser() -> _Parser:
     """dpm-render's parser: the outputs, then one flag per RenderOptions field."""
-    from dpm.methods import METHODS  # the registry names the methods
+    from dpm.methods import METHODS, scoped_users  # the registry: imports the renderer
 
     p = _Parser(
         prog="dpm-render",
-        description="Render an OBJ scene (with its MTL and optional TOML sidecar). Flags "
-        "override the sidecar's [render] table.",
+        description="Render an OBJ scene (with its MTL and optional TOML sidecar) or a Mitsuba 3 "
+        "XML scene. Flags override the sidecar's [render] table.",
         epilog="methods: " + "; ".join(f"{n}: {c.summary}" for n, c in METHODS.items()),
     )
-    p.add_argument("scene", type=Path, help="scene .obj file")
+    p.add_argument("scene", type=Path, help="scene .obj (or Mitsuba 3 .xml) file")
     p.add_argument(
         "-o", "--output", type=Path, action="append",
         help="image to write: .exr (linear) or .png (sRGB); repeat for both "
@@ -117,26 +112,11 @@ def timing_summary(seconds: dict[str, float]) -> str:
 
 
 def render_options(args: argparse.Namespace, sidecar: dict) -> RenderOptions:
-    """RenderOptions from the flags over the sidecar's [render] defaults; a sidecar value of a
-    scoped option that the chosen method does not read is passed over (it is a default for
-    the methods that read it), while such a flag is an error (`validate`)."""
-    options = RenderOptions()
-    options.method = args.method or sidecar.get("method", options.method)
-    users = options.method_class().options
-    flags = cli_fields()
-    # e.g. a weight file knows its K: --weights sets aside the sidecar's k
-    aside = {
-        n for f in flags if getattr(args, f.name) is not None for n in f.metadata["supersedes"]
-    }
-    for f in flags:
-        if (
-            f.name in sidecar
-            and f.name not in aside
-            and (not f.metadata["scoped"] or f.name in users)
-        ):
-            setattr(options, f.name, sidecar[f.name])
-        if getattr(args, f.name) is not None:
-            setattr(options, f.name, getattr(args, f.name))
+    """RenderOptions from the flags over the sidecar's [render] defaults (`options_from`)."""
+    from dpm.methods import options_from
+
+    given = {f.name: getattr(args, f.name) for f in cli_fields()}
+    options = options_from(sidecar, {k: v for k, v in given.items() if v is not None})
     options.progress = not args.quiet and sys.stderr.isatty()
     return options
 
@@ -167,9 +147,18 @@ def check_writable(path: Path) -> None:
 
 def render_main(argv: Sequence[str] | None = None) -> int:
     """`dpm-render`: load a scene, render it, write the image (and stats); returns exit status."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv == ["--version"]:  # before the parser, whose method list imports the renderer
+        print(f"dpm-render {__version__}")
+        return 0
     args = _render_parser().parse_args(argv)
 
     def body() -> None:
+        from dpm import load_file
+        from dpm.io import write_image, write_json
+        from dpm.renderer import render
+        from dpm.stopwatch import Stopwatch
+
         outputs = args.output or [Path(args.scene.stem + e) for e in (".exr", ".png")]
         for output in outputs:
             if output.suffix.lower() not in (".png", ".exr"):
@@ -182,7 +171,7 @@ def render_main(argv: Sequence[str] | None = None) -> int:
         started = process_started()
         watch = Stopwatch()
         with watch("load"):
-            scene = load_scene(args.scene)
+            scene = load_file(args.scene)
         options = render_options(args, scene.render_defaults)
         result = render(scene, options, started)  # validates the options first
         seconds = result.stats["seconds"]

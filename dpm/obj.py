@@ -8,6 +8,7 @@ offending line of a malformed file.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -111,9 +112,12 @@ def read_obj(path: Path) -> ObjMesh:
             if len(words) < 4:
                 raise InputError(f"{path}:{lineno}: vertex needs 3 coordinates")
             try:
-                vertices.append([float(w) for w in words[1:4]])
+                vertex = [float(w) for w in words[1:4]]
             except ValueError:
                 raise InputError(f"{path}:{lineno}: vertex coordinate is not a number") from None
+            if not all(math.isfinite(x) for x in vertex):
+                raise InputError(f"{path}:{lineno}: vertex coordinate is NaN or infinite")
+            vertices.append(vertex)
         elif key == "f":
             if len(words) < 4:
                 raise InputError(f"{path}:{lineno}: face needs at least 3 vertices")
@@ -153,9 +157,13 @@ def read_obj(path: Path) -> ObjMesh:
 
 
 def read_mtl(path: Path) -> dict[str, MtlEntry]:
-    """Parse an MTL file into its materials by name, keeping only the fields dpm uses."""
+    """Parse an MTL file into its materials by name, keeping only the fields dpm uses; one
+    warning line per key it passes over (textures, shininess, ...: the first line named), and
+    one for specular colours (Ks) on materials that are not mirrors (dpm's diffuse is
+    Lambertian)."""
     entries: dict[str, MtlEntry] = {}
     entry: MtlEntry | None = None
+    ignored: dict[str, int] = {}  # key -> the first line it is on
     for lineno, words in _statements(path):
         key = words[0]
         if key == "newmtl":
@@ -165,6 +173,7 @@ def read_mtl(path: Path) -> dict[str, MtlEntry]:
             entries[entry.name] = entry
             continue
         if key in _MTL_IGNORED or key.startswith(("map_", "bump", "disp", "decal", "refl", "norm")):
+            ignored.setdefault(key, lineno)
             continue
         if entry is None:
             raise InputError(f"{path}:{lineno}: '{key}' before any newmtl")
@@ -182,4 +191,11 @@ def read_mtl(path: Path) -> dict[str, MtlEntry]:
             entry.illum = int(value)
         else:
             raise InputError(f"{path}:{lineno}: unsupported MTL statement '{key}'")
+    for key, lineno in ignored.items():
+        warnings.warn(f"{path}:{lineno}: MTL key '{key}' ignored", stacklevel=2)
+    glossy = [e.name for e in entries.values() if e.ks is not None and e.illum not in (3, 5)]
+    if glossy:
+        names = ", ".join(glossy[:3]) + (", ..." if len(glossy) > 3 else "")
+        warnings.warn(f"{path}: Ks ignored on {len(glossy)} non-mirror material(s) ({names}):"
+                      " dpm's diffuse is Lambertian", stacklevel=2)  # fmt: skip
     return entries

@@ -1,10 +1,10 @@
-"""What to render: one options dataclass from which the `dpm-render` flags, their help and
-the scene sidecar's `[render]` keys are all derived.
+"""What to render: one options dataclass (plain data) from which the `dpm-render` flags,
+their help and the scene sidecar's `[render]` keys are all derived.
 
 Options a method reads only for itself (`--k`, `--radius`, ...) default to None and are
 *scoped*: each method lists the ones it reads (`Method.options`), and a flag given to a
-method that does not read it is an error. A sidecar's value for such an option is a default
-for the methods that read it and is passed over by the others.
+method that does not read it is an error (`dpm.methods.validate`). A sidecar's value for such
+an option is a default for the methods that read it and is passed over by the others.
 """
 
 from __future__ import annotations
@@ -12,8 +12,6 @@ from __future__ import annotations
 from dataclasses import MISSING, dataclass, field, fields
 from pathlib import Path
 from typing import Any
-
-from dpm.errors import InputError
 
 COMPONENTS = ("full", "caustic")
 
@@ -83,23 +81,6 @@ class RenderOptions:
     )  # fmt: skip
     progress: bool = field(default=True, metadata={"cli": False})  # progress bars
 
-    @property
-    def caustic_samples(self) -> int:
-        """Samples per pixel (the first ones) whose visible points get a caustic estimate."""
-        default = self.method_class().caustic_spp or self.spp
-        return min(self.spp, self.caustic_spp or default)
-
-    @property
-    def denoised(self) -> bool:
-        """Whether the image goes through the denoiser."""
-        return self.method_class().denoise if self.denoise is None else self.denoise
-
-    def method_class(self) -> type:
-        """The registered Method class named by `method` (InputError when there is none)."""
-        from dpm.methods import method_class  # the registry imports the renderers
-
-        return method_class(self.method)
-
 
 def cli_fields() -> list[Any]:
     """The RenderOptions fields that are dpm-render flags, in declaration order."""
@@ -126,36 +107,3 @@ def default_text(f: Any) -> str:
 def flag(name: str) -> str:
     """The command-line flag of a field name: photons_per_pass -> --photons-per-pass."""
     return "--" + name.replace("_", "-")
-
-
-def scoped_users(name: str) -> list[str]:
-    """Names of the methods that read the scoped option `name`."""
-    from dpm.methods import METHODS
-
-    return [m for m, cls in METHODS.items() if name in cls.options]
-
-
-def validate(options: RenderOptions) -> None:
-    """Raise InputError (naming the flag) for options the chosen method cannot use."""
-    cls = options.method_class()
-    if options.component not in COMPONENTS:
-        raise InputError(f"unknown component '{options.component}'; use full or caustic")
-    if options.component == "caustic" and not cls.caustic_component:
-        raise InputError(f"method '{options.method}' renders no separate caustic component")
-    for f in cli_fields():
-        if f.metadata["scoped"] and getattr(options, f.name) is not None:
-            if f.name not in cls.options:
-                users = ", ".join(scoped_users(f.name))
-                raise InputError(f"{flag(f.name)} applies to {users} only, not {options.method}")
-    for name in ("spp", "k", "caustic_spp"):
-        if getattr(options, name) is not None and getattr(options, name) < 1:
-            raise InputError(f"{flag(name)} must be at least 1")
-    if options.photons < 0:
-        raise InputError("--photons must not be negative")
-    if options.seed < 0:
-        raise InputError("--seed must not be negative")
-    for name in ("width", "height"):
-        value = getattr(options, name)
-        if value is not None and not 1 <= value <= 16384:
-            raise InputError(f"{flag(name)} must be from 1 to 16384")
-    cls.check(options)

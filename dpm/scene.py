@@ -1,6 +1,6 @@
 """Scenes: loading OBJ + MTL + TOML sidecar into flat float32 arrays, with validation.
 
-See DESIGN.md "Scene format". Material kinds: DIFFUSE (two-sided Lambertian), MIRROR (two-sided
+See docs/design.md "Scene format". Material kinds: DIFFUSE (two-sided Lambertian), MIRROR (two-sided
 perfect mirror with reflectance Ks), DIELECTRIC (smooth, IOR Ni inside, air on the front side).
 Any material with non-zero Ke is also a one-sided Lambertian emitter (front face).
 """
@@ -127,7 +127,8 @@ class Scene:
         return float(np.linalg.norm(hi - lo))
 
 
-def _material_table(names: list[str], library: dict[str, MtlEntry], obj_path: Path) -> Materials:
+def material_table(names: list[str], library: dict[str, MtlEntry], obj_path: Path) -> Materials:
+    """The material table of `names` ("": the default diffuse) from MTL entries."""
     kinds, albedo, specular, emission, ior, tf = [], [], [], [], [], []
     for name in names:
         if name == "":
@@ -239,7 +240,8 @@ def _light_reaches_geometry(tri: np.ndarray, normals: np.ndarray, emitting: np.n
 
 
 def load_scene(path: str | Path) -> Scene:
-    """Load `scene.obj`, its MTL libraries and the optional `scene.toml` sidecar beside it."""
+    """Load `scene.obj`, its MTL libraries and the optional `scene.toml` sidecar beside it
+    (`dpm.load_file` also reads Mitsuba 3 XML scenes)."""
     path = Path(path)
     if path.suffix.lower() != ".obj":
         raise InputError(f"{path}: expected a .obj scene file")
@@ -247,29 +249,40 @@ def load_scene(path: str | Path) -> Scene:
     library: dict[str, MtlEntry] = {}
     for lib in mesh.mtllibs:
         library.update(read_mtl(lib))
-    if len(mesh.faces) == 0:
-        raise InputError(f"{path}: the scene has no faces")
-
     names = list(mesh.material_names)
     face_material = mesh.face_material.copy()
     if np.any(face_material < 0):  # faces before the first usemtl get the default material
         face_material[face_material < 0] = len(names)
         names.append("")
-    materials = _material_table(names, library, path)
+    if len(mesh.faces) == 0:
+        raise InputError(f"{path}: the scene has no faces")
+    materials = material_table(names, library, path)
+    return build_scene(path, mesh.vertices[mesh.faces], face_material, materials, None, None)
 
-    tri64 = mesh.vertices[mesh.faces]  # (T, 3, 3)
-    with np.errstate(invalid="ignore", over="ignore"):  # NaN/inf triangles are dropped below
+
+def build_scene(
+    path: Path,
+    tri64: np.ndarray,
+    face_material: np.ndarray,
+    materials: Materials,
+    camera: Camera | None,
+    render: dict[str, object] | None,
+) -> Scene:
+    """A validated Scene from float64 triangles (T, 3, 3) (counter-clockwise = front), their
+    material indices (T,) into `materials`, and a camera and [render] defaults (None: those of
+    the TOML sidecar beside `path`, or a camera framing the scene)."""
+    with np.errstate(invalid="ignore", over="ignore"):  # beyond float32: dropped below
         tri = tri64.astype(np.float32)
         keep, cross, double_area = _valid_triangles(tri, tri64)
     if not keep.all():
         warnings.warn(
-            f"{path}: dropped {np.count_nonzero(~keep)} degenerate, NaN or infinite triangle(s)",
-            stacklevel=2,
+            f"{path}: dropped {np.count_nonzero(~keep)} degenerate or out-of-range triangle(s)",
+            stacklevel=3,
         )
     if not keep.any():
-        raise InputError(f"{path}: no valid triangles left (all degenerate, NaN or infinite)")
+        raise InputError(f"{path}: no valid triangles left (all degenerate or out of range)")
     tri, cross, double_area = tri[keep], cross[keep], double_area[keep]
-    material = face_material[keep].astype(np.int32)
+    material = np.asarray(face_material)[keep].astype(np.int32)
     normals = (cross / double_area[:, None]).astype(np.float32)
     areas = (0.5 * double_area).astype(np.float32)
 
@@ -282,7 +295,8 @@ def load_scene(path: str | Path) -> Scene:
             " counter-clockwise front face only)"
         )
     flat = tri.reshape(-1, 3).astype(np.float64)
-    camera, render = _read_sidecar(path.with_suffix(".toml"), flat.min(0), flat.max(0))
+    if camera is None:
+        camera, render = _read_sidecar(path.with_suffix(".toml"), flat.min(0), flat.max(0))
     return Scene(
         path=path,
         triangles=np.ascontiguousarray(tri),
@@ -292,5 +306,5 @@ def load_scene(path: str | Path) -> Scene:
         materials=materials,
         emitters=emitters,
         camera=camera,
-        render_defaults=render,
+        render_defaults=dict(render or {}),
     )

@@ -21,10 +21,10 @@ from conftest import (
 )
 from dpm import load_scene
 from dpm.denoise import RESTORE_Z, restore_certain
-from dpm.density.ppm import PPMState
+from dpm.estimators.ppm import PPMState
 from dpm.io import KNEE, linear_to_srgb8, tone_map
 from dpm.methods import auto
-from dpm.render import RenderOptions, render
+from dpm.renderer import RenderOptions, render
 from dpm.tracer import build_bvh, specular_pixels, trace_emitted
 from dpm.tracer.sampling import sobol2
 from dpm.tracer.visible import camera_ray

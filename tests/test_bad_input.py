@@ -78,7 +78,9 @@ CASES = {
     "lights face away": (FLOOR_AND_LIGHT_OBJ.replace("f 5 6 7 8", "f 5 8 7 6"), None, None, "away"),
     "camera inside an object": (_closed_box_obj(), None, CAMERA_IN_BOX, "inside a closed object"),
     "empty scene": ("mtllib scene.mtl\nv 0 0 0\n", None, None, "no faces"),
-    "only NaN triangles": ("v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", None, None, "no valid"),
+    "a NaN vertex": ("v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", None, None, "NaN or infinite"),
+    "an infinite vertex": ("v 0 0 0\nv 1 0 0\nv 0 -inf 0\nf 1 2 3\n", None, None, "NaN or inf"),
+    "only degenerate triangles": ("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", None, None, "no valid"),
 }
 
 
@@ -151,14 +153,14 @@ def test_bad_output_paths(scene_path: Path, capsys) -> None:
 
 
 def test_dropped_triangles_warn_in_one_line(tmp_path: Path, capsys) -> None:
-    obj = FLOOR_AND_LIGHT_OBJ + "v nan 0 0\nf 1 2 9\n"
+    obj = FLOOR_AND_LIGHT_OBJ + "v 2 0 0\nf 1 1 9\n"  # a triangle with no area
     path = write_scene(tmp_path, obj)
     code, err = run_render(
         capsys, [str(path), "-o", str(tmp_path / "o.png"), "--quiet", "--spp", "1"]
     )
     assert code == 0
     assert err.strip() == (
-        f"dpm-render: warning: {path}: dropped 1 degenerate, NaN or infinite triangle(s)"
+        f"dpm-render: warning: {path}: dropped 1 degenerate or out-of-range triangle(s)"
     )
 
 
@@ -181,10 +183,22 @@ EGG = Path(__file__).parent.parent / "examples" / "scenes" / "glass_egg.obj"
 def test_k_above_the_caustic_photon_count_is_one_line(tmp_path: Path, capsys) -> None:
     out = tmp_path / "out.png"
     argv = [str(EGG), "-o", str(out), "--quiet", "--width", "8", "--height", "8"]
-    code, err = run_render(capsys, [*argv, "--method", "pm", "--photons", "2000", "--k", "5000"])
+    code, err = run_render(capsys, [*argv, "--method", "pm", "--photons", "2000", "--k", "1900"])
     assert code == 2 and len(err.strip().splitlines()) == 1
-    assert "--k 5000 is more than the" in err and "caustic photons" in err
+    assert "--k 1900 is more than the" in err and "caustic photons that 2000" in err
     assert not out.exists()
+
+
+def test_k_above_the_emitted_paths_is_one_line_even_without_caustics(
+    scene_path: Path, capsys
+) -> None:
+    out = scene_path.parent / "out.png"
+    for method in ("pm", "dpm", "hybrid"):
+        argv = [str(scene_path), "-o", str(out), "--quiet", "--method", method]
+        code, err = run_render(capsys, [*argv, "--photons", "100", "--k", "500"])
+        assert code == 2 and len(err.strip().splitlines()) == 1, err
+        assert "--k 500 is more than the 100 photon paths emitted" in err
+        assert not out.exists()
 
 
 def test_a_corrupt_or_foreign_checkpoint_is_one_line(tmp_path: Path, capsys) -> None:

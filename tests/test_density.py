@@ -9,13 +9,14 @@ import numpy as np
 import pytest
 
 from dpm import load_scene, stopwatch
-from dpm.density import APPM, PM, PPM, gather
+from dpm.density import gather
 from dpm.density.progressive import run_passes
-from dpm.density.reference import ppm_reference
-from dpm.density.tuning import best, rescore, tune_widening
 from dpm.errors import InputError
-from dpm.methods.cppm import CPPM
-from dpm.methods.sppm import sppm_caustics
+from dpm.estimators import APPM, PM, PPM
+from dpm.estimators.cppm import CPPM
+from dpm.estimators.reference import ppm_reference
+from dpm.estimators.sppm import sppm_caustics
+from dpm.estimators.tuning import best, rescore, tune_widening
 from dpm.metrics import rmse
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap, VisiblePoints, build_bvh, trace_photons, trace_visible_points
@@ -170,10 +171,14 @@ def test_gathering_matches_brute_force_and_chunking(monkeypatch) -> None:
     np.testing.assert_array_equal(rows, np.argsort(d, axis=1, kind="stable")[:, :10])
     np.testing.assert_array_equal(valid, agree[rows])
     radius = rng.uniform(0.02, 0.2, 200)
-    pairs = gather.PointIndex(points, normal).within(photons, radius)
-    found = set(zip(pairs.point.tolist(), pairs.photon.tolist(), strict=True))
-    expected = set(zip(*np.nonzero((d < radius[:, None]) & agree[None]), strict=True))
-    assert found == expected and len(pairs.point) == len(found)
+    # a few points far wider than the rest (searched apart), one of those wider still
+    spread = radius.copy()
+    spread[[3, 50, 120]] = (0.9, 2.0, 40.0)
+    for r in (radius, spread):
+        pairs = gather.PointIndex(points, normal).within(photons, r)
+        found = set(zip(pairs.point.tolist(), pairs.photon.tolist(), strict=True))
+        expected = set(zip(*np.nonzero((d < r[:, None]) & agree[None]), strict=True))
+        assert found == expected and len(pairs.point) == len(found)
 
 
 def test_photon_index_answers_from_its_own_map_and_times_gathering() -> None:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from dpm import load_scene
-from dpm.render import RenderOptions, render
+from dpm.renderer import RenderOptions, render
 from dpm.scene import DIELECTRIC, MIRROR
 
 SCENES = Path(__file__).parents[1] / "examples" / "scenes"

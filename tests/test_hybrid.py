@@ -12,13 +12,13 @@ import numpy as np
 
 from dpm import load_scene
 from dpm.cli import render_main
+from dpm.estimators.dpm import DPM
 from dpm.io import read_exr
 from dpm.metrics import rmse
-from dpm.nn.estimator import DPM
 from dpm.nn.model import make_model
 from dpm.nn.train import init_params
 from dpm.nn.weights import Weights, save_weights
-from dpm.render import RenderOptions, render
+from dpm.renderer import RenderOptions, render
 from dpm.tracer import build_bvh, trace_photons, trace_visible_points
 
 ROOT = Path(__file__).parent.parent

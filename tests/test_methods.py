@@ -3,7 +3,11 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
+from dataclasses import dataclass
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -11,10 +15,10 @@ import pytest
 from conftest import write_scene
 from dpm import __version__, load_scene
 from dpm.cli import render_main
-from dpm.methods import METHODS, caustic_methods, make_estimator, method_class
-from dpm.methods.base import NearestPhotons
+from dpm.estimators import PM
+from dpm.methods import METHODS, caustic_methods, make_estimator, method_class, register
 from dpm.options import RenderOptions, cli_fields, sidecar_types
-from dpm.render import render
+from dpm.renderer import render
 
 EGG = Path(__file__).parent.parent / "examples" / "scenes" / "glass_egg.obj"
 K = 8
@@ -42,32 +46,32 @@ def test_every_registered_method_renders_through_the_one_path() -> None:
         assert ("caustic_photons" in result.stats) == (name in caustic_methods())
 
 
-def test_a_new_method_needs_only_its_class_and_a_registration(monkeypatch) -> None:
-    """What adding a method takes: a Method subclass and one entry in METHODS."""
+@dataclass(frozen=True)
+class TwicePM:
+    """A test's estimator: PM-K's estimate doubled."""
 
-    class TwicePM(NearestPhotons):
-        name = "twice-pm"
-        summary = "PM-K doubled (a test method)"
+    name: ClassVar[str] = "twice-pm"
+    summary: ClassVar[str] = "PM-K doubled (a test estimator)"
+    k: int = 50
 
-        @classmethod
-        def make_estimator(cls, **params):
-            pm = make_estimator("pm", **params)
+    def estimate(self, points, photons, watch=None):
+        """(N, 3) float32: twice PM-K's caustic radiance."""
+        return 2 * PM(k=self.k).estimate(points, photons, watch)
 
-            class Twice:
-                k = pm.k
 
-                def estimate(self, points, photons, watch=None):
-                    return 2 * pm.estimate(points, photons, watch)
-
-            return Twice()
-
-    monkeypatch.setitem(METHODS, "twice-pm", TwicePM)
+def test_a_new_estimator_needs_only_its_class_and_one_registration(monkeypatch, capsys) -> None:
+    """What adding an estimator takes: its class (here, in this file) and `register`."""
+    monkeypatch.setitem(METHODS, "twice-pm", None)  # so the entry goes after the test
+    method = register(TwicePM)
+    assert METHODS["twice-pm"] is method and method.estimator_class is TwicePM
     scene = load_scene(EGG)
     common = dict(spp=1, photons=20_000, width=8, height=8, k=K, component="caustic")
     pm = render(scene, RenderOptions(method="pm", progress=False, **common))
     twice = render(scene, RenderOptions(method="twice-pm", progress=False, **common))
     np.testing.assert_allclose(twice.image, 2 * pm.image, rtol=1e-6)
     assert twice.stats["k"] == K and "gather" in twice.stats["seconds"]
+    code, out, _ = run(capsys, ["--help"])
+    assert code == 0 and "twice-pm: PM-K doubled (a test estimator)" in " ".join(out.split())
 
 
 def test_flags_and_sidecar_keys_come_from_the_options_dataclass(capsys) -> None:
@@ -131,7 +135,7 @@ def test_an_unwritable_output_is_refused_before_the_render(
     def no_render(*args, **kwargs):
         raise AssertionError("rendered before checking the outputs")
 
-    monkeypatch.setattr("dpm.cli.render", no_render)
+    monkeypatch.setattr("dpm.renderer.render", no_render)
     folder = scene_path.parent
     (folder / "taken.png").mkdir()
     for target, expected in (
@@ -159,3 +163,14 @@ def test_make_estimator_builds_each_methods_estimator(name: str) -> None:
         params["k"] = 50  # a shipped model
     estimator = make_estimator(name, **params)
     assert callable(estimator.estimate)
+
+
+def test_version_answers_without_importing_the_renderer() -> None:
+    """`dpm-render --version` loads neither Numba, SciPy nor JAX (start-up time)."""
+    code = (
+        "import sys; from dpm.cli import render_main; assert render_main(['--version']) == 0; "
+        "print(sorted(m for m in ('numba', 'scipy', 'jax', 'dpm.tracer') if m in sys.modules))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines() == [f"dpm-render {__version__}", "[]"]

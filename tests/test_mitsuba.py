@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from dpm import load_scene
-from dpm.density import PPM
 from dpm.density.progressive import run_passes
-from dpm.render import RenderOptions, render
+from dpm.estimators import PPM
+from dpm.renderer import RenderOptions, render
 from dpm.tracer import build_bvh, trace_visible_points
 from dpm.validation.mitsuba import render_mitsuba
 from dpm.validation.noise import block_z, relative_sigma_of_mean_difference

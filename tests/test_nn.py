@@ -17,8 +17,8 @@ import pytest
 
 from dpm.cli import render_main, train_main
 from dpm.data.dataset import DataConfig
-from dpm.density import PM
 from dpm.errors import InputError
+from dpm.estimators import PM
 from dpm.nn.config import Config, ModelConfig, TrainConfig, load_config
 from dpm.nn.features import flux_map, flux_unmap
 from dpm.nn.fused import available

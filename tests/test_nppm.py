@@ -10,11 +10,11 @@ import pytest
 from scipy.integrate import dblquad
 from test_density import egg, plane_photons, plane_points, relative_error  # noqa: F401
 
-from dpm.density import PPM
-from dpm.density.nppm import NPPM
 from dpm.density.progressive import run_passes
 from dpm.density.shaped import P_MAX, P_MIN, normaliser, relative_weight
 from dpm.errors import InputError
+from dpm.estimators import PPM
+from dpm.estimators.nppm import NPPM
 from dpm.nn.model import make_model
 from dpm.nn.train import init_params
 from dpm.nn.weights import Weights, save_weights

@@ -18,7 +18,7 @@ from dpm.denoise import restore_certain
 from dpm.io import tone_map
 from dpm.methods.adaptive import Halves
 from dpm.metrics import rmse
-from dpm.render import RenderOptions, render
+from dpm.renderer import RenderOptions, render
 
 EGG = Path(__file__).parent.parent / "examples" / "scenes" / "glass_egg.obj"  # caustic + diffuse
 SIZE = 32  # pixels across the test images
@@ -113,7 +113,7 @@ import sys
 from numba.core.dispatcher import Dispatcher
 from dpm import load_scene
 from dpm.methods import auto
-from dpm.render import RenderOptions, render
+from dpm.renderer import RenderOptions, render
 
 def signatures():
     return {(name, str(s)) for name, mod in list(sys.modules.items()) if name.startswith("dpm")

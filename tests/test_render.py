@@ -13,10 +13,10 @@ import numpy as np
 from dpm import load_scene
 from dpm.cli import render_main
 from dpm.denoise import guides
-from dpm.density import PM
 from dpm.density.base import luminance
+from dpm.estimators import PM
 from dpm.io import read_exr
-from dpm.render import RenderOptions, render
+from dpm.renderer import RenderOptions, render
 from dpm.tracer import (
     build_bvh,
     shade,

@@ -66,7 +66,13 @@ Ke 4 2 1
 
 
 def test_every_material_kind(tmp_path: Path) -> None:
-    scene = load_scene(write_scene(tmp_path, ALL_KINDS_OBJ, ALL_KINDS_MTL))
+    with pytest.warns(UserWarning) as caught:  # Ns and map_Kd: one line each
+        scene = load_scene(write_scene(tmp_path, ALL_KINDS_OBJ, ALL_KINDS_MTL))
+    assert sorted(str(w.message).split(": ", 1)[1] for w in caught) == [
+        "MTL key 'Ns' ignored",
+        "MTL key 'map_Kd' ignored",
+    ]
+    assert all(str(w.message).startswith(f"{tmp_path / 'scene.mtl'}:") for w in caught)
     m = scene.materials
     by_name = {name: i for i, name in enumerate(m.names)}
     assert len(scene.triangles) == 11  # the quad is split into two triangles
@@ -137,14 +143,16 @@ def test_default_camera_sees_the_whole_scene(scene_path: Path) -> None:
     assert np.all(np.abs(x) <= 1) and np.all(np.abs(y) <= 1)
 
 
-def test_degenerate_nan_and_inf_triangles_are_dropped_with_a_warning(tmp_path: Path) -> None:
+def test_degenerate_and_out_of_range_triangles_are_dropped_with_a_warning(
+    tmp_path: Path,
+) -> None:
     obj = """\
 mtllib scene.mtl
 v -1 0 -1
 v 1 0 -1
 v 1 0 1
-v nan 0 0
-v inf 0 0
+v 0 0 -1
+v 1e300 0 0
 v 2 0 -1
 v -1 1 -1
 v 1 1 1
@@ -157,7 +165,13 @@ f 1 5 2
 usemtl light
 f 7 9 8
 """
-    with pytest.warns(UserWarning, match="dropped 3 degenerate"):
+    with pytest.warns(UserWarning, match="dropped 3 degenerate or out-of-range"):
         scene = load_scene(write_scene(tmp_path, obj))
     assert len(scene.triangles) == 2
     assert np.all(np.isfinite(scene.triangles))
+
+
+def test_specular_colour_on_a_diffuse_material_is_one_warning(tmp_path: Path) -> None:
+    mtl = "newmtl floor\nKd 0.5 0.5 0.5\nKs 0.5 0.5 0.5\nillum 2\nnewmtl light\nKe 10 10 10\n"
+    with pytest.warns(UserWarning, match=r"Ks ignored on 1 non-mirror material\(s\) \(floor\)"):
+        load_scene(write_scene(tmp_path, mtl=mtl))

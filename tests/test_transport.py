@@ -19,7 +19,7 @@ from scipy.spatial import cKDTree
 
 from conftest import FLOOR_AND_LIGHT_MTL, WATER, WATER_LE, water_between_lights, write_scene
 from dpm import load_scene
-from dpm.render import RenderOptions, render
+from dpm.renderer import RenderOptions, render
 from dpm.tracer import build_bvh, shade, trace_photons, trace_visible_points
 from dpm.tracer.photon_grid import photon_grid
 from dpm.validation.noise import block_z

@@ -17,7 +17,7 @@ from test_truths import glass_radiance, glass_scene, pixel_truth
 from dpm import load_scene
 from dpm.density.radius import FOOTPRINTS, NEAREST, SHAPE, initial_radii
 from dpm.methods import METHODS, method_class
-from dpm.render import RenderOptions, render
+from dpm.renderer import RenderOptions, render
 from dpm.tracer import PhotonMap
 
 FAR = 1000.0  # the triangle's distance behind the camera (scene units; the scene is ~4 wide)

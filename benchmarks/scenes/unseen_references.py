@@ -17,7 +17,7 @@ height of the scene's own aspect (W x H below), into benchmarks/results/unseen/:
   luminance, `noise_luminance`).
 - NAME-WxH-caustic.exr + .json: the caustic radiance the camera sees (light paths L S+ D
   seen through any specular chain), per pixel: --caustic-spp visible points per pixel and
-  --paths guided photon paths of PPM in two independent halves (`dpm.density.reference`,
+  --paths guided photon paths of PPM in two independent halves (`dpm.estimators.reference`,
   as `benchmarks/hybrid.py`'s `caustic_reference`). Its initial radius is half the median
   pixel footprint at the visible points (scale and resolution invariant, unlike a fraction of
   the scene's bounding box, which the huge floor and far wall make 1000 units long). The
@@ -60,7 +60,7 @@ from make_unseen import SCENES_DIR, UNSEEN, unseen_scenes  # noqa: E402
 from dpm import load_scene  # noqa: E402
 from dpm.camera import Camera  # noqa: E402
 from dpm.density.base import luminance  # noqa: E402
-from dpm.density.reference import ppm_reference  # noqa: E402
+from dpm.estimators.reference import ppm_reference  # noqa: E402
 from dpm.io import write_image, write_json  # noqa: E402
 from dpm.methods.auto import has_specular  # noqa: E402
 from dpm.metrics import rmse  # noqa: E402

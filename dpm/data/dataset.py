@@ -115,8 +115,8 @@ def make_shard(config: DataConfig, index: int, threads: int | None = None) -> tu
     manifest entry and its files, {path relative to `out`: bytes}, written by the caller."""
     import numba
 
-    from dpm import load_scene
-    from dpm.density.reference import ppm_reference
+    from dpm.estimators.reference import ppm_reference
+    from dpm.scene import load_scene
     from dpm.tracer import build_bvh, trace_photons, trace_visible_points
 
     numba.set_num_threads(threads or numba.config.NUMBA_NUM_THREADS)

@@ -24,6 +24,7 @@ from dpm.tracer.photon_grid import NORMAL_COS
 
 POINTS_PER_CHUNK = 1 << 14  # K-nearest queries answered at once
 PHOTONS_PER_CHUNK = 1 << 16  # photons of a pass whose points are sought at once
+SPREAD = 4.0  # points wider than this times the 90th percentile radius are searched apart
 GATHER = "gather"  # the stopwatch stage of tree building and queries
 
 
@@ -125,24 +126,45 @@ class PointIndex:
 
     def _within(self, photons: PhotonMap, radius: np.ndarray | float) -> Pairs:
         radius = np.broadcast_to(np.asarray(radius, np.float64), (len(self.position),))
-        reach = float(radius.max(initial=0.0))
+        parts = self._pairs(self.tree, np.arange(len(self.position)), radius, photons)
+        if not parts:
+            empty = np.zeros(0, np.int64)
+            parts.append((empty, empty, np.zeros(0)))
+        point, photon, dist = (np.concatenate(c) for c in zip(*parts, strict=True))
+        return Pairs(point, photon, dist)
+
+    def _pairs(
+        self, tree: cKDTree, ids: np.ndarray, radius: np.ndarray, photons: PhotonMap
+    ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """(points, photons, distances) of the pairs within radius of the points `ids` that
+        `tree` holds. The pair search reaches as far as its widest point, so a few points
+        far wider than the rest (seen 500 units away past a mirror) would pair every photon
+        with every point: points wider than SPREAD times the 90th percentile of the radii
+        are searched apart, in a tree of their own (and so on, if they spread too)."""
+        own = radius[ids]
+        reach = float(own.max(initial=0.0))
+        typical = float(np.quantile(own, 0.9)) if len(own) else 0.0
+        wide = own > SPREAD * typical if typical > 0 else np.zeros(len(own), bool)
+        if wide.any():
+            reach = SPREAD * typical
         parts = []
         for start in range(0, len(photons), PHOTONS_PER_CHUNK):
             position = photons.position[start : start + PHOTONS_PER_CHUNK].astype(np.float64)
             # Most photons land where no point's radius reaches (the discs cover a few per
             # cent of the surfaces): a parallel nearest-point query drops them before the
             # single-threaded pair search.
-            near, _ = self.tree.query(position, k=1, distance_upper_bound=reach, workers=-1)
+            near, _ = tree.query(position, k=1, distance_upper_bound=reach, workers=-1)
             reached = np.flatnonzero(near <= reach)
             if len(reached) == 0:
                 continue
             other = cKDTree(position[reached])
-            m = self.tree.sparse_distance_matrix(other, reach, output_type="ndarray")
-            point, photon, dist = m["i"], reached[m["j"]] + start, m["v"]
+            m = tree.sparse_distance_matrix(other, reach, output_type="ndarray")
+            point, photon, dist = ids[m["i"]], reached[m["j"]] + start, m["v"]
             keep = (dist < radius[point]) & _agree(self.normal[point], photons.normal[photon])
+            if wide.any():
+                keep &= radius[point] <= reach  # the wide points' pairs come from their tree
             parts.append((point[keep], photon[keep], dist[keep]))
-        if not parts:
-            empty = np.zeros(0, np.int64)
-            parts.append((empty, empty, np.zeros(0)))
-        point, photon, dist = (np.concatenate(c) for c in zip(*parts, strict=True))
-        return Pairs(point, photon, dist)
+        if wide.any():
+            apart = ids[wide]
+            parts += self._pairs(cKDTree(self.position[apart]), apart, radius, photons)
+        return parts

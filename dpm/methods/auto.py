@@ -44,12 +44,12 @@ from tqdm import tqdm
 from dpm.camera import Camera
 from dpm.denoise import denoise, guides, restore_certain
 from dpm.density.base import luminance
-from dpm.density.ppm import ALPHA, PPMState, check_progressive
 from dpm.density.progressive import pass_seed
 from dpm.errors import InputError
+from dpm.estimators.ppm import ALPHA, PPMState, check_progressive
+from dpm.estimators.sppm import sppm_gather
 from dpm.methods.adaptive import ADAPT_AFTER, EXTRA_CAP, EXTRA_PER_PIXEL, Halves
 from dpm.methods.base import Method, check_photons
-from dpm.methods.sppm import sppm_gather
 from dpm.options import RenderOptions
 from dpm.scene import DIFFUSE, Scene
 from dpm.stopwatch import Stopwatch
@@ -208,166 +208,16 @@ class Auto(Method):
     def render_image(
         self, bvh: BVH, camera: Camera, watch: Stopwatch, started: float
     ) -> tuple[np.ndarray, dict[str, Any]]:
-        """(H, W, 3) float32 linear RGB and the plan's stats: passes until the budget."""
-        o, scene = self.options, self.scene
-        w, h = camera.width, camera.height
-        pixels = w * h
-        full = o.component == "full"
-        state = PPMState.start(pixels, o.radius or 1.0, ALPHA)  # radii set at the first pass
-        narrow = PPMState.start(pixels, 1.0, ALPHA)  # the same at NARROW × its radii
-        paths = Halves(h, w)
-        extra_paths = 0
-        albedo, normal = np.zeros((pixels, 3), np.float64), np.zeros((pixels, 3), np.float64)
-        deadline = None if o.time is None else started + o.time
-        finish = FINISH_SECONDS + FINISH_SECONDS_PER_PIXEL * pixels * (full and o.denoised)
-        # Photon paths per pass: without a budget, --photons shared by the --spp passes; with
-        # one, --photons-per-pass or the plan's (the first pass already uses it, so a --time
-        # render of N passes of P paths is the render with --spp N --photons N·P).
-        if o.time is None:
-            given, why = max(1, o.photons // o.spp), "--photons / --spp"
-        else:
-            given, why = o.photons_per_pass, "--photons-per-pass"
-        plan = None
-        first_photons = given or max(1, round(PHOTONS_PER_PIXEL * pixels))
-        if not has_specular(scene):
-            plan = make_plan(scene, pixels, 1.0, 0.0, None)
-        dropped = 0
-        # With mirrors or glass, the light seen along the camera's specular chains (the
-        # lights' images in them: specks that may cover a hundredth of a pixel) is estimated
-        # apart from the paths, from more camera samples where pixels see a mirror or glass:
-        # EMISSION_SAMPLES per pass each, and EMISSION_EXTRA per such pixel placed where it
-        # varies (adaptive sampling, cross-fitted as for the paths). Where it is known to
-        # SEEN_ERROR it is added after the denoiser (which takes such specks for noise). The
-        # paths (and so their adaptive sampling) carry the rest.
-        separate = has_specular(scene)
-        glassy = np.flatnonzero(specular_pixels(scene, bvh, camera)) if separate and full else None
-        glow = Halves(h, w)  # the light seen, per half: samples every pass, and extra ones
-
-        def see_light(first: np.ndarray) -> None:
-            """Add this pass's light seen: its first sample per pixel (P, 3), then
-            EMISSION_SAMPLES more where the pixel sees a mirror or glass, then EMISSION_EXTRA
-            per such pixel where the other half's samples vary most."""
-            half = j % 2
-            glow.add_pass(half, first)
-            # each half's samples of a pixel extend one stratified sequence, pass by pass
-            sums, squares = trace_emitted(
-                scene, bvh, camera, glassy, EMISSION_SAMPLES, pass_seed(o.seed, half, 2),
-                EMISSION_SAMPLES * (j // 2),
-            )  # fmt: skip
-            glow.base[half].add(glassy, EMISSION_SAMPLES, sums, squares)
-            extra, counts = glow.plan_extra(half, EMISSION_EXTRA * len(glassy), EMISSION_CAP)
-            done = glow.extra[half].count[extra].astype(np.int64)
-            sums, squares = trace_emitted(
-                scene, bvh, camera, extra, counts, pass_seed(o.seed, half, 3), done
-            )
-            glow.extra[half].add(extra, counts, sums, squares)
-
-        grid_radius = 0.0  # set at the first pass, then shrunk by each (probabilistic PPM)
-        total = o.spp if deadline is None else None
-        bar = tqdm(total=total, unit="pass", disable=not o.progress, desc=self.name)
-        j = last = 0
-        begun = time.monotonic()
-        self.setup_seconds = begun - started  # of the budget, gone before the first pass
+        """(H, W, 3) float32 linear RGB and the plan's stats: passes until the budget, each
+        `Passes.run_pass` (camera samples, photons, the light seen, adaptive samples), the plan
+        after the first, then `Passes.finish` (the caustic estimate, denoising, composing)."""
+        passes = Passes(self, bvh, camera, watch, started)
         while True:
-            seed = pass_seed(o.seed, j)
-            if full and plan is not None and plan.caustics == "off" and not separate:
-                # no caustic estimate and no light seen apart: whole pixels in one kernel, no
-                # visible points kept
-                with watch("path"):
-                    part, a, n, _, bad = trace_pixels(scene, bvh, camera, 1, seed, (0, h), False)
-                paths.add_pass(j % 2, part.reshape(pixels, 3))
-                grid = None
-                albedo += a.reshape(pixels, 3)
-                normal += n.reshape(pixels, 3)
-                dropped += bad
-            else:
-                with watch("visible_points"):
-                    points = trace_visible_points(scene, bvh, camera, 1, seed, (0, h))
-                if j == 0:
-                    if o.radius is None:
-                        state.radius = footprint_radius(points, camera)
-                    narrow.radius = state.radius * NARROW
-                    grid_radius = GRID_RADII * float(np.median(state.radius))
-                n_paths = first_photons if plan is None else plan.photons_per_pass
-                photons = grid = None
-                if n_paths and (plan is None or plan.caustics != "off"):
-                    with watch("photons"):
-                        photons = trace_photons(
-                            scene, bvh, n_paths, o.seed, caustic_only=True, first_path=state.paths
-                        )
-                if full:
-                    with watch("shade"):
-                        grid = None if photons is None else photon_grid(photons, grid_radius)
-                        reflected, bad = shade(scene, bvh, points, seed, False, grid)
-                        if separate:
-                            paths.add_pass(j % 2, points.throughput * reflected)
-                        else:
-                            paths.add_pass(j % 2, points.emitted + points.throughput * reflected)
-                    if separate:
-                        with watch("emitted"):
-                            see_light(points.emitted.astype(np.float64))
-                    dropped += bad
-                    a, n = guides(points)
-                    albedo += a
-                    normal += n
-                if photons is not None:
-                    sppm_gather((state, narrow), points, photons, watch)
-            if full and j >= ADAPT_AFTER:
-                with watch("adaptive"):
-                    budget = round(EXTRA_PER_PIXEL * pixels)
-                    extra, counts = paths.plan_extra(j % 2, budget, EXTRA_CAP)
-                    sums, squares, bad = trace_listed(
-                        scene, bvh, camera, extra, counts, pass_seed(o.seed, j, 1), grid,
-                        not separate,
-                    )  # fmt: skip
-                    paths.extra[j % 2].add(extra, counts, sums, squares)
-                    extra_paths += int(counts.sum())
-                    dropped += bad
-            if plan is None:
-                path_light = float((paths.mean() + glow.mean()).mean(axis=1).sum()) if full else 0.0
-                caustic_light = float(state.irradiance().mean(axis=1).sum())
-                plan = make_plan(scene, pixels, path_light, caustic_light, given, why)
-            if j == 0 and full and (deadline is not None or o.spp > 1):
-                with watch("kernels"):
-                    warm_later_kernels(
-                        scene, bvh, camera, points if separate else None,
-                        grid if plan.caustics != "off" else None,
-                        deadline is not None or o.spp > ADAPT_AFTER,
-                    )  # fmt: skip
-            j += 1
-            grid_radius *= np.sqrt((j + ALPHA) / (j + 1))  # Knaus & Zwicker 2011, Eq. 17
-            bar.update(1)
-            now = time.monotonic()
-            last, begun = now - begun, now  # a pass's time includes what runs between passes
-            if j == 1:  # could the budget hold one pass and the finishing?
-                self.pass_seconds = last
-                self.overran = deadline is not None and now + finish > deadline
-            if deadline is None:
-                if j >= o.spp:
-                    break
-            elif now + last + finish > deadline:
+            passes.run_pass()
+            if passes.done():
                 break
-        bar.close()
-        self.passes, self.plan, self.caustic_photons = j, plan, state.photons
-        self.dropped, self.extra_paths = dropped, extra_paths
-        self.light_pixels = 0 if glassy is None else len(glassy)
-        self.light_samples = int(sum(glow.half(k).count.sum() for k in (0, 1))) - j * pixels
-        caustic, sharp = sharper_where_biased(state, narrow, LEPSKI_Z)  # throughput · ρ/π
-        self.sharp_pixels = int(sharp.sum())
-        caustic = caustic.astype(np.float32)
-        if not full:
-            return caustic.reshape(h, w, 3), self.stats()
-        seen, error = glow.mean(), glow.standard_error()
-        # known well enough as it is (not where one sample per half tells no error: inf)
-        after = (error < SEEN_ERROR * luminance(seen))[:, None]
-        image = (paths.mean() + np.where(after, 0, seen)).astype(np.float32).reshape(h, w, 3)
-        if o.denoised:
-            with watch("denoise"):
-                guide = (albedo / j).reshape(h, w, 3), (normal / j).reshape(h, w, 3)
-                total = np.hypot(paths.standard_error(), np.where(after[:, 0], 0, error))
-                image = restore_certain(image, denoise(image, *guide), total.reshape(h, w))
-        image += np.where(after, seen, 0).astype(np.float32).reshape(h, w, 3)
-        return image + caustic.reshape(h, w, 3), self.stats()
+        image = passes.finish()
+        return image, self.stats()
 
     def stats(self) -> dict[str, Any]:
         """Passes, the plan, caustic photons, dropped samples, adaptive paths, the pixels
@@ -382,3 +232,215 @@ class Auto(Method):
             "pass_seconds": self.pass_seconds, "setup_seconds": self.setup_seconds,
             "overran": self.overran,
         }  # fmt: skip
+
+
+class Passes:
+    """One `auto` render's passes: what they accumulate and the stages of each, in order."""
+
+    def __init__(
+        self, method: Auto, bvh: BVH, camera: Camera, watch: Stopwatch, started: float
+    ) -> None:
+        o, scene = method.options, method.scene
+        self.method, self.o, self.scene, self.bvh, self.camera = method, o, scene, bvh, camera
+        self.watch = watch
+        self.w, self.h = camera.width, camera.height
+        self.pixels = self.w * self.h
+        self.full = o.component == "full"
+        self.state = PPMState.start(self.pixels, o.radius or 1.0, ALPHA)  # radii: first pass
+        self.narrow = PPMState.start(self.pixels, 1.0, ALPHA)  # the same at NARROW × its radii
+        self.paths = Halves(self.h, self.w)
+        self.extra_paths = 0
+        self.albedo = np.zeros((self.pixels, 3), np.float64)
+        self.normal = np.zeros((self.pixels, 3), np.float64)
+        self.deadline = None if o.time is None else started + o.time
+        self.finish_seconds = FINISH_SECONDS + FINISH_SECONDS_PER_PIXEL * self.pixels * (
+            self.full and method.denoises(o)
+        )
+        # Photon paths per pass: without a budget, --photons shared by the --spp passes; with
+        # one, --photons-per-pass or the plan's (the first pass already uses it, so a --time
+        # render of N passes of P paths is the render with --spp N --photons N·P).
+        if o.time is None:
+            self.given, self.why = max(1, o.photons // o.spp), "--photons / --spp"
+        else:
+            self.given, self.why = o.photons_per_pass, "--photons-per-pass"
+        self.plan = None if has_specular(scene) else make_plan(scene, self.pixels, 1.0, 0.0, None)
+        self.first_photons = self.given or max(1, round(PHOTONS_PER_PIXEL * self.pixels))
+        self.dropped = 0
+        # With mirrors or glass, the light seen along the camera's specular chains (the
+        # lights' images in them: specks that may cover a hundredth of a pixel) is estimated
+        # apart from the paths, from more camera samples where pixels see a mirror or glass:
+        # EMISSION_SAMPLES per pass each, and EMISSION_EXTRA per such pixel placed where it
+        # varies (adaptive sampling, cross-fitted as for the paths). Where it is known to
+        # SEEN_ERROR it is added after the denoiser (which takes such specks for noise). The
+        # paths (and so their adaptive sampling) carry the rest.
+        self.separate = has_specular(scene)
+        self.glassy = (
+            np.flatnonzero(specular_pixels(scene, bvh, camera))
+            if self.separate and self.full
+            else None
+        )
+        self.glow = Halves(self.h, self.w)  # the light seen, per half: every pass, and extra
+        self.grid_radius = 0.0  # set at the first pass, then shrunk by each (probabilistic PPM)
+        self.points = self.grid = None
+        total = o.spp if self.deadline is None else None
+        self.bar = tqdm(total=total, unit="pass", disable=not o.progress, desc=method.name)
+        self.j = 0  # passes done
+        self.begun = time.monotonic()
+        method.setup_seconds = self.begun - started  # of the budget, gone before the first pass
+
+    def run_pass(self) -> None:
+        """One pass: camera samples (and with them photons and the light seen), adaptive
+        samples, the plan after the first pass, and the kernels later passes need."""
+        self.camera_samples()
+        if self.full and self.j >= ADAPT_AFTER:
+            self.adaptive_samples()
+        if self.plan is None:
+            self.make_plan()
+        if self.j == 0 and self.full and (self.deadline is not None or self.o.spp > 1):
+            with self.watch("kernels"):
+                warm_later_kernels(
+                    self.scene, self.bvh, self.camera, self.points if self.separate else None,
+                    self.grid if self.plan.caustics != "off" else None,
+                    self.deadline is not None or self.o.spp > ADAPT_AFTER,
+                )  # fmt: skip
+        self.j += 1
+        self.grid_radius *= np.sqrt((self.j + ALPHA) / (self.j + 1))  # Knaus & Zwicker, Eq. 17
+        self.bar.update(1)
+
+    def camera_samples(self) -> None:
+        """One camera sample per pixel, path-traced without caustics; with the plan's caustics,
+        a pass of photon paths gathered into SPPM's statistics at its visible points."""
+        o, scene, bvh, camera, watch = self.o, self.scene, self.bvh, self.camera, self.watch
+        j, seed = self.j, pass_seed(self.o.seed, self.j)
+        if (
+            self.full
+            and self.plan is not None
+            and self.plan.caustics == "off"
+            and not self.separate
+        ):
+            # no caustic estimate and no light seen apart: whole pixels in one kernel, no
+            # visible points kept
+            with watch("path"):
+                part, a, n, _, bad = trace_pixels(scene, bvh, camera, 1, seed, (0, self.h), False)
+            self.paths.add_pass(j % 2, part.reshape(self.pixels, 3))
+            self.grid = None
+            self.albedo += a.reshape(self.pixels, 3)
+            self.normal += n.reshape(self.pixels, 3)
+            self.dropped += bad
+            return
+        state = self.state
+        with watch("visible_points"):
+            points = self.points = trace_visible_points(scene, bvh, camera, 1, seed, (0, self.h))
+        if j == 0:
+            if o.radius is None:
+                state.radius = footprint_radius(points, camera)
+            self.narrow.radius = state.radius * NARROW
+            self.grid_radius = GRID_RADII * float(np.median(state.radius))
+        n_paths = self.first_photons if self.plan is None else self.plan.photons_per_pass
+        photons = self.grid = None
+        if n_paths and (self.plan is None or self.plan.caustics != "off"):
+            with watch("photons"):
+                photons = trace_photons(
+                    scene, bvh, n_paths, o.seed, caustic_only=True, first_path=state.paths
+                )
+        if self.full:
+            with watch("shade"):
+                self.grid = None if photons is None else photon_grid(photons, self.grid_radius)
+                reflected, bad = shade(scene, bvh, points, seed, False, self.grid)
+                if self.separate:
+                    self.paths.add_pass(j % 2, points.throughput * reflected)
+                else:
+                    self.paths.add_pass(j % 2, points.emitted + points.throughput * reflected)
+            if self.separate:
+                with watch("emitted"):
+                    self.see_light(points.emitted.astype(np.float64))
+            self.dropped += bad
+            a, n = guides(points)
+            self.albedo += a
+            self.normal += n
+        if photons is not None:
+            sppm_gather((state, self.narrow), points, photons, watch)
+
+    def see_light(self, first: np.ndarray) -> None:
+        """Add this pass's light seen: its first sample per pixel (P, 3), then
+        EMISSION_SAMPLES more where the pixel sees a mirror or glass, then EMISSION_EXTRA per
+        such pixel where the other half's samples vary most."""
+        scene, bvh, camera, glow, glassy = self.scene, self.bvh, self.camera, self.glow, self.glassy
+        half = self.j % 2
+        glow.add_pass(half, first)
+        # each half's samples of a pixel extend one stratified sequence, pass by pass
+        sums, squares = trace_emitted(
+            scene, bvh, camera, glassy, EMISSION_SAMPLES, pass_seed(self.o.seed, half, 2),
+            EMISSION_SAMPLES * (self.j // 2),
+        )  # fmt: skip
+        glow.base[half].add(glassy, EMISSION_SAMPLES, sums, squares)
+        extra, counts = glow.plan_extra(half, EMISSION_EXTRA * len(glassy), EMISSION_CAP)
+        done = glow.extra[half].count[extra].astype(np.int64)
+        sums, squares = trace_emitted(
+            scene, bvh, camera, extra, counts, pass_seed(self.o.seed, half, 3), done
+        )
+        glow.extra[half].add(extra, counts, sums, squares)
+
+    def adaptive_samples(self) -> None:
+        """Extra camera paths where this half's pixels vary most (`dpm.methods.adaptive`)."""
+        with self.watch("adaptive"):
+            budget = round(EXTRA_PER_PIXEL * self.pixels)
+            extra, counts = self.paths.plan_extra(self.j % 2, budget, EXTRA_CAP)
+            sums, squares, bad = trace_listed(
+                self.scene, self.bvh, self.camera, extra, counts,
+                pass_seed(self.o.seed, self.j, 1), self.grid, not self.separate,
+            )  # fmt: skip
+            self.paths.extra[self.j % 2].add(extra, counts, sums, squares)
+            self.extra_paths += int(counts.sum())
+            self.dropped += bad
+
+    def make_plan(self) -> None:
+        """The plan after the first pass, from the light its paths and photons found."""
+        path_light = 0.0
+        if self.full:
+            path_light = float((self.paths.mean() + self.glow.mean()).mean(axis=1).sum())
+        caustic_light = float(self.state.irradiance().mean(axis=1).sum())
+        self.plan = make_plan(
+            self.scene, self.pixels, path_light, caustic_light, self.given, self.why
+        )
+
+    def done(self) -> bool:
+        """Whether to stop: --spp passes done, or the next pass would overrun the budget (a
+        pass's time includes what runs between passes)."""
+        now = time.monotonic()
+        last, self.begun = now - self.begun, now
+        if self.j == 1:  # could the budget hold one pass and the finishing?
+            self.method.pass_seconds = last
+            self.method.overran = (
+                self.deadline is not None and now + self.finish_seconds > self.deadline
+            )
+        if self.deadline is None:
+            return self.j >= self.o.spp
+        return now + last + self.finish_seconds > self.deadline
+
+    def finish(self) -> np.ndarray:
+        """(H, W, 3) float32: SPPM's caustics at the sharper of two radii where it shows
+        (`sharper_where_biased`), added to the path-traced image after denoising it (the
+        light seen that is known well enough added after the denoiser too)."""
+        self.bar.close()
+        m, j, h, w = self.method, self.j, self.h, self.w
+        m.passes, m.plan, m.caustic_photons = j, self.plan, self.state.photons
+        m.dropped, m.extra_paths = self.dropped, self.extra_paths
+        m.light_pixels = 0 if self.glassy is None else len(self.glassy)
+        m.light_samples = int(sum(self.glow.half(k).count.sum() for k in (0, 1))) - j * self.pixels
+        caustic, sharp = sharper_where_biased(self.state, self.narrow, LEPSKI_Z)  # throughput·ρ/π
+        m.sharp_pixels = int(sharp.sum())
+        caustic = caustic.astype(np.float32)
+        if not self.full:
+            return caustic.reshape(h, w, 3)
+        seen, error = self.glow.mean(), self.glow.standard_error()
+        # known well enough as it is (not where one sample per half tells no error: inf)
+        after = (error < SEEN_ERROR * luminance(seen))[:, None]
+        image = (self.paths.mean() + np.where(after, 0, seen)).astype(np.float32).reshape(h, w, 3)
+        if m.denoises(self.o):
+            with self.watch("denoise"):
+                guide = (self.albedo / j).reshape(h, w, 3), (self.normal / j).reshape(h, w, 3)
+                total = np.hypot(self.paths.standard_error(), np.where(after[:, 0], 0, error))
+                image = restore_certain(image, denoise(image, *guide), total.reshape(h, w))
+        image += np.where(after, seen, 0).astype(np.float32).reshape(h, w, 3)
+        return image + caustic.reshape(h, w, 3)

@@ -9,16 +9,19 @@ render loop, option checking and `--help` ask the method instead of keeping list
 
 from __future__ import annotations
 
+from dataclasses import fields
+from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
 
 from dpm.camera import Camera
 from dpm.density.gather import PhotonIndex
-from dpm.density.pm import check_k
-from dpm.density.ppm import ALPHA, check_progressive
 from dpm.density.progressive import run_passes
 from dpm.errors import InputError
+from dpm.estimators.pm import check_k
+from dpm.estimators.ppm import ALPHA, check_progressive
+from dpm.estimators.ppm import Progressive as ProgressiveEstimator
 from dpm.options import RenderOptions
 from dpm.scene import Scene
 from dpm.stopwatch import Stopwatch
@@ -50,6 +53,16 @@ class Method:
     @classmethod
     def check(cls, options: RenderOptions) -> None:
         """Raise InputError for options this method cannot use (beyond the generic checks)."""
+
+    @classmethod
+    def denoises(cls, options: RenderOptions) -> bool:
+        """Whether the image goes through the denoiser: --denoise, else the method's default."""
+        return cls.denoise if options.denoise is None else options.denoise
+
+    @classmethod
+    def caustic_samples(cls, options: RenderOptions) -> int:
+        """Samples per pixel (the first ones) whose visible points get a caustic estimate."""
+        return min(options.spp, options.caustic_spp or cls.caustic_spp or options.spp)
 
     @classmethod
     def make_estimator(cls, **params: Any) -> Any:
@@ -98,7 +111,7 @@ class PhotonMethod(Method):
         return {
             "photon_paths": self.options.photons,
             "caustic_photons": self.caustic_photons,
-            "caustic_spp": self.options.caustic_samples,
+            "caustic_spp": self.caustic_samples(self.options),
         }
 
 
@@ -106,11 +119,22 @@ class NearestPhotons(PhotonMethod):
     """One caustic photon map, indexed once, and an estimator over each point's K nearest."""
 
     options = frozenset({"k", "caustic_spp"})
-    default_k: ClassVar[int] = 50
+
+    @classmethod
+    def check(cls, options: RenderOptions) -> None:
+        """PhotonMethod's checks, and --k no more than the emitted paths (each deposits at
+        most one caustic photon), whatever the scene (also one without caustics)."""
+        super().check(options)
+        if options.k is not None and options.k > options.photons:
+            raise InputError(
+                f"--k {options.k} is more than the {options.photons} photon paths emitted (each "
+                "gives at most one caustic photon); raise --photons or lower --k"
+            )
 
     def estimator(self) -> Any:
-        """The estimator with this render's --k (default `default_k`)."""
-        return self.make_estimator(k=self.options.k or self.default_k)
+        """The estimator with this render's --k and the options it reads (the estimator's
+        own defaults for those not given)."""
+        return self.make_estimator(**estimator_options(self.estimator_class, self.options))
 
     def prepare(self, bvh: BVH, camera: Camera, watch: Stopwatch) -> None:
         """Build the estimator, trace the caustic photon map and index it."""
@@ -149,8 +173,11 @@ class Progressive(PhotonMethod):
         )
 
     def estimator(self) -> Any:
-        """The estimator with this render's initial radius and paths per pass."""
-        return self.make_estimator(radius=self.radius(), photons_per_pass=self.photons_per_pass())
+        """The estimator with this render's initial radius, paths per pass and the options it
+        reads."""
+        given = estimator_options(self.estimator_class, self.options)
+        given |= {"radius": self.radius(), "photons_per_pass": self.photons_per_pass()}
+        return self.make_estimator(**given)
 
     def radius(self) -> float | None:
         """Initial radius: --radius, or None: each point's own, from what the camera sees
@@ -189,3 +216,31 @@ def check_photons(options: RenderOptions) -> None:
             f"--photons must be at least 1 for method {options.method} (for an image "
             "without caustics use --method pt-nocaustic)"
         )
+
+
+def estimator_options(estimator: type, options: RenderOptions) -> dict[str, Any]:
+    """The render options given (not None) that are parameters of the estimator dataclass,
+    paths as strings."""
+    given = {}
+    for f in fields(estimator):
+        value = getattr(options, f.name, None)
+        if value is not None:
+            given[f.name] = str(value) if isinstance(value, Path) else value
+    return given
+
+
+def estimator_method(estimator: type) -> type[Method]:
+    """The render method of a density estimator (a class of `dpm.estimators`): estimates at
+    the render's visible points, over the K nearest photons or in progressive passes, under
+    the estimator's name, summary, options and stopwatch stage."""
+    shape = Progressive if issubclass(estimator, ProgressiveEstimator) else NearestPhotons
+    attributes = {
+        "__doc__": f"The render method of {estimator.__name__}: {estimator.summary}.",
+        "name": estimator.name,
+        "summary": estimator.summary,
+        "estimator_class": estimator,
+        "options": shape.options | getattr(estimator, "options", frozenset()),
+        "stage": getattr(estimator, "stage", Method.stage),
+        "__module__": estimator.__module__,
+    }
+    return type(f"{estimator.__name__}Method", (shape,), attributes)

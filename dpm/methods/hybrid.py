@@ -1,12 +1,13 @@
-"""`hybrid` (paper §5), the default: path tracing without caustics, DPM caustics at one
-sample per pixel (the network costs far more than a path sample), then Open Image Denoise."""
+"""`hybrid` (paper §5): path tracing without caustics, DPM caustics at one sample per pixel
+(the network costs far more than a path sample), then Open Image Denoise."""
 
 from __future__ import annotations
 
-from dpm.methods.dpm import DeepPhotonMapping
+from dpm.estimators.dpm import DPM
+from dpm.methods.base import estimator_method
 
 
-class Hybrid(DeepPhotonMapping):
+class Hybrid(estimator_method(DPM)):
     """pt-nocaustic + DPM caustics at 1 spp + OIDN."""
 
     name = "hybrid"

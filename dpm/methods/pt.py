@@ -2,7 +2,7 @@
 
 `pt` counts every path; `pt-nocaustic` leaves out, at the first diffuse vertex the camera
 sees, light that arrives through mirrors or glass straight from a light (the caustics), which
-the photon methods add (DESIGN.md, "Light-path split").
+the photon methods add (docs/design.md, "Light-path split").
 """
 
 from __future__ import annotations

@@ -3,7 +3,8 @@
 `shade_kernel` estimates the radiance each visible point reflects towards the camera. With
 `caustics` False it leaves out, at the visible point only, light that a BSDF-sampled ray
 reaches through one or more specular surfaces (the S+ L ends that caustic photons carry), so
-that pt-nocaustic plus a caustic density estimate converges to pt (DESIGN.md, light-path split).
+that pt-nocaustic plus a caustic density estimate converges to pt (docs/design.md,
+light-path split).
 Given a `PhotonGrid` of caustic photons, it also leaves them out at the later diffuse vertices
 and adds the grid's density estimate there instead (`auto`).
 """

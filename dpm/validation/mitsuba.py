@@ -1,6 +1,6 @@
 """Converter from a dpm scene to Mitsuba 3, the independent renderer our tests compare against.
 
-Materials map as DESIGN.md states: twosided(diffuse), twosided(conductor, material=none),
+Materials map as docs/design.md states: twosided(diffuse), twosided(conductor, material=none),
 dielectric (int_ior = Ni, ext_ior = 1, specular_transmittance = Tf), `area` emitters with the
 emitter's own Kd behind them; flat-shaded meshes; perspective camera with fov_axis="x" and a
 box pixel filter; the `path` integrator. Run as a module it renders an example scene with both
@@ -145,7 +145,7 @@ def side_by_side(path: Path, output: Path, spp: int) -> None:
 
     from dpm import load_scene
     from dpm.io import linear_to_srgb8
-    from dpm.render import RenderOptions, render
+    from dpm.renderer import RenderOptions, render
 
     load_mitsuba()  # before the dpm render: a missing Mitsuba fails at once
     scene = load_scene(path)

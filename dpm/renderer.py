@@ -20,7 +20,8 @@ from tqdm import tqdm
 from dpm.camera import Camera
 from dpm.denoise import denoise, guides
 from dpm.errors import InputError
-from dpm.options import RenderOptions, validate
+from dpm.methods import method_class, validate
+from dpm.options import RenderOptions
 from dpm.scene import Scene
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import (
@@ -58,7 +59,7 @@ def check_camera_outside(scene: Scene, bvh: BVH, camera: Camera) -> None:
     """Raise InputError when the camera sits inside a closed object.
 
     Inside means rays in every direction hit the back of a surface (normals point outwards,
-    DESIGN.md); a camera inside a room whose walls face inwards is fine.
+    docs/design.md); a camera inside a room whose walls face inwards is fine.
     """
     directions = _fibonacci_sphere(256)
     origins = np.broadcast_to(camera.origin, directions.shape)
@@ -83,7 +84,7 @@ def render(
     started = time.monotonic() if started is None else started
     options = options or RenderOptions()
     validate(options)
-    cls = options.method_class()
+    cls = method_class(options.method)
     method = cls(scene, options)
     camera = scene.camera.with_resolution(options.width, options.height)
     watch = Stopwatch()
@@ -97,7 +98,7 @@ def render(
     if cls.renders_image:  # passes of its own (auto): it denoises what it should
         image, extra = method.render_image(bvh, camera, watch, started)
         stats.update(
-            denoised=options.denoised, width=camera.width, height=camera.height,
+            denoised=cls.denoises(options), width=camera.width, height=camera.height,
             seed=options.seed, samples=camera.width * camera.height * extra["spp"],
             triangles=int(len(scene.triangles)), bvh_nodes=bvh.n_nodes, **extra,
         )  # fmt: skip
@@ -105,7 +106,7 @@ def render(
 
     w, h, spp = camera.width, camera.height, options.spp
     image = np.zeros((h, w, 3), np.float32)
-    denoised = options.denoised
+    denoised = cls.denoises(options)
     if denoised:  # the denoiser's guides: first diffuse surface's albedo and normal per pixel
         albedo, normal = np.zeros_like(image), np.zeros_like(image)
     pixels = method.caustic_pixels()
@@ -121,7 +122,7 @@ def render(
     elif full:
         watch.add("path", 0.0)
     hits = dropped = 0
-    cs = options.caustic_samples
+    cs = cls.caustic_samples(options)
     blocks = full or cls.at_points
     show = options.progress and rows_per_step < h
     with tqdm(total=h, unit="row", disable=not show, desc=options.method) as bar:

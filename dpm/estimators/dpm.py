@@ -1,20 +1,25 @@
-"""The learned estimator behind the common interface: `DPM(k=50).estimate(points, photons)`."""
+"""Deep photon mapping (the paper): `DPM(k=50).estimate(points, photons)`.
+
+The network (`dpm.nn`) imports JAX, which costs about a second: it is imported when a model is
+first loaded, so a render that does not use DPM never pays for it.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
+from typing import TYPE_CHECKING, ClassVar
 
-import jax
 import numpy as np
 
 from dpm.density.gather import Photons, Watch
-from dpm.density.pm import k_nearest_start
 from dpm.errors import InputError
-from dpm.nn.infer import make_query_predict, predict_points
-from dpm.nn.weights import Weights, load_weights, shipped_weights
+from dpm.estimators.pm import k_nearest_start
 from dpm.tracer import VisiblePoints
+
+if TYPE_CHECKING:
+    from dpm.nn.weights import Weights
 
 DEFAULT_K = 50  # the shipped model used when neither k nor a weight file is given
 
@@ -22,6 +27,9 @@ DEFAULT_K = 50  # the shipped model used when neither k nor a weight file is giv
 @cache
 def _load(path: Path, stamp: tuple[int, int]) -> tuple[Weights, object]:
     """Weights and their jitted predictor, once per file version (stamp: mtime, size)."""
+    from dpm.nn.infer import make_query_predict
+    from dpm.nn.weights import load_weights
+
     weights = load_weights(path)
     return weights, make_query_predict(weights.model())
 
@@ -43,6 +51,13 @@ class DPM:
     k: None takes the weight file's K (DEFAULT_K for the shipped models).
     """
 
+    name: ClassVar[str] = "dpm"
+    summary: ClassVar[str] = (
+        "deep photon mapping: a network weighs each of the --k nearest photons (Eq. 2)"
+    )
+    options: ClassVar[frozenset[str]] = frozenset({"weights"})  # render options it reads
+    stage: ClassVar[str] = "network"
+
     k: int | None = None
     weights: str | Path | None = None
 
@@ -58,6 +73,10 @@ class DPM:
     def estimate(self, points: VisiblePoints, photons: Photons, watch: Watch = None) -> np.ndarray:
         """(N, 3) float32 caustic radiance leaving each visible point (0 where not hit);
         stages "gather" and "network" (features, inference, Eq. 2) count on `watch`."""
+        import jax
+
+        from dpm.nn.infer import predict_points
+
         weights, predict = self.model()
         watch, index, out = k_nearest_start(points, photons, self.k, watch)
         if len(index) == 0:
@@ -81,4 +100,6 @@ class DPM:
 
     def path(self) -> Path:
         """The weight file: `weights`, or the shipped model for k."""
+        from dpm.nn.weights import shipped_weights
+
         return Path(self.weights) if self.weights is not None else shipped_weights(self.k)

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from dpm.density.ppm import PPM
 from dpm.density.progressive import pass_seed, run_passes
+from dpm.estimators.ppm import PPM
 from dpm.metrics import rmse
 from dpm.parallel import fan_out
 from dpm.scene import Scene

@@ -113,6 +113,11 @@ class Progressive:
 class PPM(Progressive):
     """PPM at fixed visible points: initial radius (scene units), emitted paths per pass."""
 
+    name: ClassVar[str] = "ppm"
+    summary: ClassVar[str] = (
+        "progressive photon mapping (per-point radius, count and flux; α = 0.7)"
+    )
+
     def start(self, n: int, radius: Radius) -> PPMState:
         """The state before the first pass, for n points with initial radius `radius`."""
         return PPMState.start(n, radius, self.alpha)

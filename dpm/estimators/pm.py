@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -39,6 +40,11 @@ def k_nearest_start(
 @dataclass(frozen=True)
 class PM:
     """Kernel density estimate over the k nearest photons; kernel 'uniform' or 'cone'."""
+
+    name: ClassVar[str] = "pm"
+    summary: ClassVar[str] = (
+        "photon mapping, uniform kernel over the --k nearest photons (paper Eq. 1)"
+    )
 
     k: int = 50
     kernel: str = "uniform"

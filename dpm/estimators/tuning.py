@@ -11,12 +11,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from dpm.density.reference import caustic_rmse
-from dpm.methods import make_estimator
+from dpm.estimators import ESTIMATORS
+from dpm.estimators.reference import caustic_rmse
 from dpm.tracer import PhotonMap, VisiblePoints
 
 PASSES = (10, 100, 1000)  # passes per run: photons_per_pass = paths / passes
-TUNED = ("ppm", "appm")  # the paper's tuned baselines (any registered progressive method works)
+TUNED = ("ppm", "appm")  # the paper's tuned baselines (any progressive estimator's name works)
 
 
 @dataclass(frozen=True)
@@ -28,6 +28,11 @@ class Trial:
     photons_per_pass: int  # emitted paths per pass
     rmse: float  # caustic RMSE against the reference
     seconds: float  # gathering and estimation time
+
+
+def by_name(name: str) -> type:
+    """The estimator class of `dpm.estimators.ESTIMATORS` named `name`."""
+    return {cls.name: cls for cls in ESTIMATORS}[name]
 
 
 def radii(diagonal: float, count: int = 10, lo: float = 1e-4, hi: float = 4e-3) -> np.ndarray:
@@ -55,7 +60,7 @@ def tune(
             for n in passes:
                 per_pass = max(1, photons.n_paths // n)
                 start = time.perf_counter()
-                estimator = make_estimator(method, radius=float(radius), photons_per_pass=per_pass)
+                estimator = by_name(method)(radius=float(radius), photons_per_pass=per_pass)
                 estimate = estimator.estimate(points, photons)
                 seconds = time.perf_counter() - start
                 error = caustic_rmse(points, estimate, reference)

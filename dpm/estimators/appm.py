@@ -27,8 +27,8 @@ from dpm.density.kernels import (
     biweight,
     biweight_laplacian,
 )
-from dpm.density.ppm import ALPHA, Progressive, Radius, start_radius
 from dpm.density.progressive import Statistics
+from dpm.estimators.ppm import ALPHA, Progressive, Radius, start_radius
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap
 
@@ -91,6 +91,11 @@ class APPMState(Statistics):
 @dataclass(frozen=True)
 class APPM(Progressive):
     """APPM at fixed visible points: initial pilot radius (scene units), paths per pass."""
+
+    name: ClassVar[str] = "appm"
+    summary: ClassVar[str] = (
+        "adaptive PPM: each point's bandwidth from its estimated density Laplacian"
+    )
 
     # The pilot bandwidth bounds the radius each point chooses ([h / 16, h]), so its default
     # starts wider than PPM's radius (×1, ×2, ×3 on the examples: geometric mean of default /

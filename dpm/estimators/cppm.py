@@ -24,15 +24,15 @@ density is flat a disc average is the point's value.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 from scipy.special import chdtri  # not scipy.stats: its import costs ~0.8 s at start
 
 from dpm.density.base import in_plane, tangent_frame
 from dpm.density.gather import PointIndex
-from dpm.density.ppm import PPMState, Progressive, Radius, start_radius
 from dpm.density.progressive import ALPHA
-from dpm.methods.base import Progressive as ProgressiveMethod
+from dpm.estimators.ppm import PPMState, Progressive, Radius, start_radius
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap
 
@@ -94,14 +94,11 @@ class CPPMState(PPMState):
 class CPPM(Progressive):
     """CPPM at fixed visible points: initial radius (scene units), emitted paths per pass."""
 
+    name: ClassVar[str] = "cppm"
+    summary: ClassVar[str] = (
+        "chi-squared PPM: a radius shrinks only where its disc's photons are not uniform"
+    )
+
     def start(self, n: int, radius: Radius) -> CPPMState:
         """The state before the first pass, for n points with initial radius `radius`."""
         return CPPMState.start(n, radius, self.alpha)
-
-
-class ChiSquaredPPM(ProgressiveMethod):
-    """CPPM: PPM whose radii shrink only where a χ² test finds the disc non-uniform."""
-
-    name = "cppm"
-    summary = "chi-squared PPM: a radius shrinks only where its disc's photons are not uniform"
-    estimator_class = CPPM

@@ -21,12 +21,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
 from dpm.density.base import in_plane, tangent_frame
 from dpm.density.gather import PointIndex
-from dpm.density.ppm import PPMState, Progressive, Radius, start_radius
 from dpm.density.progressive import ALPHA
 from dpm.density.shaped import (
     MOMENTS,
@@ -38,6 +38,7 @@ from dpm.density.shaped import (
     to_axes,
 )
 from dpm.errors import InputError
+from dpm.estimators.ppm import PPMState, Progressive, Radius, start_radius
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap
 
@@ -129,6 +130,13 @@ class NPPMState(PPMState):
 class NPPM(Progressive):
     """nppm at fixed visible points: initial radius (scene units), emitted paths per pass and
     the network's weight file ('': the shipped one)."""
+
+    name: ClassVar[str] = "nppm"
+    summary: ClassVar[str] = (
+        "neural PPM: PPM whose kernel a network shapes per point and pass (consistent)"
+    )
+    options: ClassVar[frozenset[str]] = frozenset({"weights"})  # render options it reads
+    stage: ClassVar[str] = NETWORK
 
     weights: str = ""
 

@@ -1,0 +1,132 @@
+"""Stochastic progressive photon mapping (Hachisuka & Jensen 2009), per pixel: the estimator.
+
+Unlike the estimators at fixed visible points, SPPM traces new visible points every pass
+(one jittered camera sample per pixel, Fresnel-sampled through glass) and keeps PPM's
+statistics per pixel, so pixels seen through glass or partly covered average over their
+whole footprint. The flux a pixel gathers is weighted by its camera throughput and ρ/π, so
+the result is the caustic radiance as the camera sees it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+from tqdm import tqdm
+
+from dpm.camera import Camera
+from dpm.density.gather import PointIndex
+from dpm.density.progressive import pass_seed
+from dpm.density.radius import initial_radii
+from dpm.estimators.ppm import ALPHA, PPM, PPMState, check_progressive
+from dpm.scene import Scene
+from dpm.stopwatch import Stopwatch
+from dpm.tracer import BVH, PhotonMap, VisiblePoints, trace_photons, trace_visible_points
+
+
+def sppm_caustics(
+    scene: Scene,
+    bvh: BVH,
+    camera: Camera,
+    n_paths: int,
+    seed: int,
+    radius: float | None,
+    photons_per_pass: int,
+    alpha: float = ALPHA,
+    progress: bool = False,
+    watch: Stopwatch | None = None,
+) -> tuple[np.ndarray, int]:
+    """((H, W, 3) float32 caustic radiance per pixel as the camera sees it, caustic photons)
+    from n_paths emitted photon paths in passes of photons_per_pass from the initial radius
+    (scene units; None: each pixel's from its first visible point, `pixel_radii`); stages
+    "visible_points", "photons", "gather" and "estimate" count on watch."""
+    check_progressive(radius or 1.0, photons_per_pass, alpha)
+    watch = watch or Stopwatch()
+    state = PPMState.start(camera.width * camera.height, radius or 1.0, alpha)
+    n_passes = -(-n_paths // photons_per_pass)
+    for j in tqdm(range(n_passes), unit="pass", disable=not progress, desc="sppm"):
+        with watch("visible_points"):
+            points = trace_visible_points(
+                scene, bvh, camera, 1, pass_seed(seed, j), (0, camera.height)
+            )
+        with watch("photons"):
+            photons = trace_photons(
+                scene, bvh, min(photons_per_pass, n_paths - j * photons_per_pass), seed,
+                caustic_only=True, first_path=j * photons_per_pass,
+            )  # fmt: skip
+        if j == 0 and radius is None:
+            with watch("estimate"):
+                state.radius = pixel_radii(points, photons)
+        sppm_gather((state,), points, photons, watch)
+    image = state.irradiance()  # already weighted by throughput · ρ/π: radiance
+    return image.reshape(camera.height, camera.width, 3).astype(np.float32), state.photons
+
+
+def pixel_radii(points: VisiblePoints, photons: PhotonMap) -> np.ndarray:
+    """(P,) float64 initial radius per pixel from its first pass's visible point (one per
+    pixel) and photons (`dpm.density.radius.initial_radii`); pixels that saw no diffuse
+    surface take the median."""
+    hit = np.flatnonzero(points.hit)
+    footprint = None if points.footprint is None else points.footprint[hit]
+    found = initial_radii(points.position[hit], points.normal[hit], footprint, photons)
+    fill = float(np.median(found)) if len(found) else 1.0
+    radius = np.full(len(points), fill)
+    radius[hit] = found
+    return radius
+
+
+def sppm_gather(
+    states: Sequence[PPMState],
+    points: VisiblePoints,
+    photons: PhotonMap,
+    watch: Stopwatch,
+) -> None:
+    """Gather one pass of photons into per-pixel PPM statistics at this pass's visible
+    points (one sample per pixel, in pixel order), into each of `states` (radii of their
+    own; one search at the largest); stage "estimate" counts on watch."""
+    with watch("estimate"):
+        hit = np.flatnonzero(points.hit)  # one sample per pixel: row = pixel
+        index = PointIndex(points.position[hit], points.normal[hit])
+        reach = np.max([s.radius[hit] for s in states], axis=0)
+        pairs = index.within(photons, reach, watch)
+        pixel = hit[pairs.point]
+        weight = points.throughput[pixel].astype(np.float64) * points.albedo[pixel] / np.pi
+        flux = photons.flux[pairs.photon].astype(np.float64) * photons.n_paths * weight
+        for state in states:
+            inside = pairs.distance < state.radius[pixel]
+            state.update(pixel[inside], flux[inside])  # PPM's statistics, per pixel
+            state.paths += photons.n_paths
+            state.passes += 1
+            state.photons += len(photons)
+
+
+@dataclass(frozen=True)
+class SPPM(PPM):
+    """SPPM: initial radius (scene units; None: each pixel's own), emitted paths per pass.
+
+    `estimate_pixels` is SPPM proper: new camera samples every pass, statistics per pixel.
+    At visible points fixed by the caller there is nothing to resample, and SPPM is PPM
+    (Hachisuka & Jensen 2009): `estimate` is PPM's.
+    """
+
+    name: ClassVar[str] = "sppm"
+    summary: ClassVar[str] = "stochastic PPM: new camera samples every pass, statistics per pixel"
+
+    def estimate_pixels(
+        self,
+        scene: Scene,
+        bvh: BVH,
+        camera: Camera,
+        n_paths: int,
+        seed: int,
+        progress: bool = False,
+        watch: Stopwatch | None = None,
+    ) -> tuple[np.ndarray, int]:
+        """((H, W, 3) float32 caustic radiance per pixel as the camera sees it, caustic
+        photons) from n_paths emitted photon paths (`sppm_caustics`)."""
+        return sppm_caustics(
+            scene, bvh, camera, n_paths, seed, self.radius, self.photons_per_pass, self.alpha,
+            progress, watch,
+        )  # fmt: skip
