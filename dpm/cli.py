@@ -25,6 +25,8 @@ from dpm.options import COMPONENTS, cli_fields, default_text, flag
 if TYPE_CHECKING:
     from dpm.options import RenderOptions
 
+FIRST_RUN = "minutes on a 2-core machine"  # measured: benchmarks/cold_start.py
+
 
 class _Parser(argparse.ArgumentParser):
     """argparse that reports a usage error in one line (exit 2) instead of usage + error."""
@@ -121,6 +123,14 @@ def render_options(args: argparse.Namespace, sidecar: dict) -> RenderOptions:
     return options
 
 
+def kernels_cold() -> bool:
+    """Whether this process found Numba's kernel cache empty (or stale): the first render
+    then compiles for minutes before its first pass."""
+    from dpm.tracer._cache import COLD
+
+    return COLD
+
+
 def warn_overrun(stats: dict, budget: float | None) -> None:
     """One line on stderr when the first pass alone overran the --time budget (the image is
     then that one pass, and the render took longer than asked)."""
@@ -173,6 +183,9 @@ def render_main(argv: Sequence[str] | None = None) -> int:
         with watch("load"):
             scene = load_file(args.scene)
         options = render_options(args, scene.render_defaults)
+        if not args.quiet and kernels_cold():
+            print(f"dpm-render: compiling the renderer's kernels for the first run (once: "
+                  f"{FIRST_RUN}; later runs load them)", file=sys.stderr)  # fmt: skip
         result = render(scene, options, started)  # validates the options first
         seconds = result.stats["seconds"]
         seconds.update(watch.seconds)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from dataclasses import dataclass
@@ -174,3 +175,21 @@ def test_version_answers_without_importing_the_renderer() -> None:
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     assert done.stdout.splitlines() == [f"dpm-render {__version__}", "[]"]
+
+
+def test_a_render_with_an_empty_kernel_cache_says_it_compiles(scene_path: Path, tmp_path) -> None:
+    """One line on stderr when Numba's kernel cache is empty (checked in a subprocess: the
+    render is refused right after, before compiling anything), none when it holds kernels."""
+    argv = [sys.executable, "-m", "dpm.cli", str(scene_path), "-o", str(tmp_path / "o.png"),
+            "--method", "pm", "--photons", "0"]  # fmt: skip
+    cached = tmp_path / "cached" / "mirror" / "tracer"
+    cached.mkdir(parents=True)
+    (cached / "traverse.closest-1.py311.nbi").write_bytes(b"")
+    said = {}
+    for name, folder in (("empty", tmp_path / "empty"), ("cached", tmp_path / "cached")):
+        env = dict(os.environ, NUMBA_CACHE_DIR=str(folder))
+        done = subprocess.run(argv, capture_output=True, text=True, env=env)
+        assert done.returncode == 2 and "--photons must be at least 1" in done.stderr
+        said[name] = [line for line in done.stderr.splitlines() if "compiling" in line]
+    assert len(said["empty"]) == 1 and said["empty"][0].startswith("dpm-render: compiling")
+    assert said["cached"] == []

@@ -1,8 +1,11 @@
-"""Invalidation of Numba's on-disk kernel cache, run once when `dpm.tracer` is imported."""
+"""Numba's on-disk kernel cache: invalidated when a kernel source changed, and whether this
+process starts with it empty (`COLD`: the first render then compiles its kernels), both
+decided once when `dpm.tracer` is imported."""
 
 from __future__ import annotations
 
 import hashlib
+import os
 from pathlib import Path
 
 
@@ -29,4 +32,12 @@ def drop_stale_kernel_cache() -> None:
         pass  # a read-only install: Numba then caches elsewhere or compiles each run
 
 
+def kernels_cached() -> bool:
+    """Whether Numba's cache holds compiled tracer kernels (beside the sources, or under
+    NUMBA_CACHE_DIR, which mirrors the source folders)."""
+    place = Path(os.environ.get("NUMBA_CACHE_DIR") or Path(__file__).parent / "__pycache__")
+    return place.is_dir() and next(place.rglob("traverse.*.nbi"), None) is not None
+
+
 drop_stale_kernel_cache()
+COLD = not kernels_cached()  # before any kernel of this process compiles
