@@ -39,6 +39,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
+from scipy.ndimage import uniform_filter
 from tqdm import tqdm
 
 from dpm.camera import Camera
@@ -86,6 +87,9 @@ EMISSION_SAMPLES, EMISSION_EXTRA, EMISSION_CAP = 16, 8, 256
 NARROW, LEPSKI_Z = 0.5, 2.0
 SEEN_ERROR = 0.6  # relative standard error of a pixel's light seen below which it skips
 # the denoiser
+# A pixel's caustic from fewer photons than this (relative error 1/√N above SEEN_ERROR) is
+# spread over the smallest window, of SPREAD_WINDOWS, whose sparse pixels hold that many.
+SPARSE_PHOTONS, SPREAD_WINDOWS = 1.0 / SEEN_ERROR**2, (3, 5, 9, 17, 33)
 MIN_CAUSTIC_SHARE = 1e-3  # caustics under this share of the first pass's light are left out
 # Seconds kept for what follows the last pass (denoising, writing): a fixed part and per pixel.
 FINISH_SECONDS, FINISH_SECONDS_PER_PIXEL = 0.05, 3e-6
@@ -182,6 +186,41 @@ def sharper_where_biased(
     se = scale * np.sqrt(1 / np.maximum(wide.count, 1) + 1 / np.maximum(narrow.count, 1))
     sharp = np.abs(lb - la) > z * se
     return np.where(sharp[:, None], b, a), sharp
+
+
+def spread_sparse(
+    caustic: np.ndarray, count: np.ndarray, overlap: np.ndarray, h: int, w: int
+) -> np.ndarray:
+    """(P, 3) float64 caustic radiance per pixel with the sparse pixels' estimates spread:
+    a pixel whose disc holds fewer than SPARSE_PHOTONS photons (a relative standard error
+    above SEEN_ERROR: stray light refracted far from the caustic, which one photon paints as
+    a speck the shape of the kernel) takes the mean of the sparse pixels of the smallest
+    square window, of SPREAD_WINDOWS, that holds SPARSE_PHOTONS (each pixel's count over
+    `overlap` (P,), the pixels a photon's discs cover, so a photon counts once); the pixels
+    with photons enough are neither changed nor averaged in (a caustic's edge does not
+    bleed). As passes
+    add photons every pixel's count passes SPARSE_PHOTONS, so the estimate stays
+    consistent."""
+    sparse = count < SPARSE_PHOTONS
+    if not sparse.any():
+        return caustic
+    member = sparse.reshape(h, w).astype(np.float64)
+    values = np.where(sparse[:, None], caustic, 0.0).reshape(h, w, 3)
+    photons = np.where(sparse, count / np.maximum(overlap, 1.0), 0.0).reshape(h, w)
+    out, todo = caustic.copy(), sparse.reshape(h, w).copy()
+    for i, size in enumerate(SPREAD_WINDOWS):
+        # window means of the sparse pixels: sums over the window / its sparse pixels
+        n = uniform_filter(member, size, mode="constant")
+        found = uniform_filter(photons, size, mode="constant") * size * size
+        take = todo & ((found >= SPARSE_PHOTONS) | (i == len(SPREAD_WINDOWS) - 1)) & (n > 0)
+        if take.any():
+            mean = (
+                uniform_filter(values, (size, size, 1), mode="constant")
+                / np.maximum(n, 1e-30)[..., None]
+            )
+            out.reshape(h, w, 3)[take] = mean[take]
+            todo &= ~take
+    return out
 
 
 class Auto(Method):
@@ -282,6 +321,7 @@ class Passes:
         self.glow = Halves(self.h, self.w)  # the light seen, per half: every pass, and extra
         self.grid_radius = 0.0  # set at the first pass, then shrunk by each (probabilistic PPM)
         self.points = self.grid = None
+        self.footprint = None  # (P,) pixel width at each pixel's first visible point
         total = o.spp if self.deadline is None else None
         self.bar = tqdm(total=total, unit="pass", disable=not o.progress, desc=method.name)
         self.j = 0  # passes done
@@ -332,8 +372,9 @@ class Passes:
         with watch("visible_points"):
             points = self.points = trace_visible_points(scene, bvh, camera, 1, seed, (0, self.h))
         if j == 0:
+            self.footprint = footprint_radius(points, camera) / RADIUS_FOOTPRINTS
             if o.radius is None:
-                state.radius = footprint_radius(points, camera)
+                state.radius = RADIUS_FOOTPRINTS * self.footprint
             self.narrow.radius = state.radius * NARROW
             self.grid_radius = GRID_RADII * float(np.median(state.radius))
         n_paths = self.first_photons if self.plan is None else self.plan.photons_per_pass
@@ -430,6 +471,12 @@ class Passes:
         m.light_samples = int(sum(self.glow.half(k).count.sum() for k in (0, 1))) - j * self.pixels
         caustic, sharp = sharper_where_biased(self.state, self.narrow, LEPSKI_Z)  # throughput·ρ/π
         m.sharp_pixels = int(sharp.sum())
+        if self.footprint is not None:  # caustics were estimated
+            count = np.where(sharp, self.narrow.count, self.state.count)
+            radius = np.where(sharp, self.narrow.radius, self.state.radius)
+            # each photon falls in the discs of about π (radius in pixel widths)² pixels
+            overlap = np.pi * (radius / self.footprint) ** 2
+            caustic = spread_sparse(caustic, count, overlap, h, w)
         caustic = caustic.astype(np.float32)
         if not self.full:
             return caustic.reshape(h, w, 3)
