@@ -124,11 +124,11 @@ def render_options(args: argparse.Namespace, sidecar: dict) -> RenderOptions:
 
 
 def kernels_cold() -> bool:
-    """Whether this process found Numba's kernel cache empty (or stale): the first render
-    then compiles for minutes before its first pass."""
-    from dpm.tracer._cache import COLD
+    """Whether Numba's kernel cache is empty (or was stale): the render compiles for
+    minutes before its first pass."""
+    from dpm.tracer._cache import kernels_cached
 
-    return COLD
+    return not kernels_cached()
 
 
 def warn_overrun(stats: dict, budget: float | None) -> None:

@@ -1,6 +1,5 @@
-"""Numba's on-disk kernel cache: invalidated when a kernel source changed, and whether this
-process starts with it empty (`COLD`: the first render then compiles its kernels), both
-decided once when `dpm.tracer` is imported."""
+"""Numba's on-disk kernel cache: invalidated when a kernel source changed (once, when
+`dpm.tracer` is imported), and whether it holds compiled kernels."""
 
 from __future__ import annotations
 
@@ -40,4 +39,3 @@ def kernels_cached() -> bool:
 
 
 drop_stale_kernel_cache()
-COLD = not kernels_cached()  # before any kernel of this process compiles
