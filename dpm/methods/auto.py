@@ -139,14 +139,15 @@ def make_plan(
                 f"{n:,} photon paths per pass ({why})")  # fmt: skip
 
 
-def footprint_radius(points: VisiblePoints, camera: Camera) -> np.ndarray:
-    """(pixels,) float64 initial radius per pixel: RADIUS_FOOTPRINTS pixel widths at the
-    distance of its first visible point (straight from the camera; pixels that see nothing
-    get the median), so the kernel starts as wide as a few pixels wherever it is seen."""
-    radius = RADIUS_FOOTPRINTS * camera.footprint(points.position)
-    seen = points.hit & (radius > 0)
-    fill = np.median(radius[seen]) if seen.any() else 1.0
-    return np.where(seen, radius, fill)
+def pixel_footprints(points: VisiblePoints, camera: Camera) -> np.ndarray:
+    """(pixels,) float64 pixel width (scene units) at the distance of each pixel's first
+    visible point (straight from the camera; pixels that see nothing get the median): the
+    initial radius is RADIUS_FOOTPRINTS of them, so the kernel starts as wide as a few
+    pixels wherever it is seen."""
+    width = camera.footprint(points.position)
+    seen = points.hit & (width > 0)
+    fill = np.median(width[seen]) if seen.any() else 1.0 / RADIUS_FOOTPRINTS
+    return np.where(seen, width, fill)
 
 
 def warm_later_kernels(
@@ -372,7 +373,7 @@ class Passes:
         with watch("visible_points"):
             points = self.points = trace_visible_points(scene, bvh, camera, 1, seed, (0, self.h))
         if j == 0:
-            self.footprint = footprint_radius(points, camera) / RADIUS_FOOTPRINTS
+            self.footprint = pixel_footprints(points, camera)
             if o.radius is None:
                 state.radius = RADIUS_FOOTPRINTS * self.footprint
             self.narrow.radius = state.radius * NARROW
