@@ -67,7 +67,8 @@ def _unoccluded(bvh, ax, ay, az, bx, by, bz, stack):
 # every inlined call that takes the scene's or the BVH's tuple of arrays (next_surface, any_hit,
 # scatter_specular, ...) increments and decrements each array's reference count: some forty
 # atomic updates per ray on counters that both threads share, which cost a third of the
-# shading time on two cores. Functions it calls inherit the setting.
+# shading time on two cores. Functions inlined into it inherit the setting; the traversal
+# functions it calls (`closest_hit`, `any_hit`) are compiled with it as well.
 @nb.njit(cache=True, _nrt=False, error_model="numpy")
 def shade_one(
     bvh, sc, seed, stream, eps, caustics, grid, stack, px, py, pz, nx, ny, nz, ar, ag, ab

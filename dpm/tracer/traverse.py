@@ -1,8 +1,13 @@
 """Ray queries: the watertight ray–triangle test and closest-hit / any-hit BVH traversal.
 
 The single-ray functions (`closest_hit`, `any_hit`) are what other Numba kernels call inside
-their own `prange` loops (they inline there); the `*_batch` kernels run them over arrays of
-rays. Arithmetic is float64 on float32 geometry, with no fastmath: watertightness needs exact
+their own `prange` loops; the `*_batch` kernels run them over arrays of rays. They are
+compiled once, not inlined into each caller: inlined, the traversal loop was copied into
+every call site (camera chains call it five times), and the first render compiled for three
+minutes instead of about one and a half, for no measurable speed (a call passes only the BVH's
+arrays, the ray and the stack).
+
+Arithmetic is float64 on float32 geometry, with no fastmath: watertightness needs exact
 IEEE. Traversal tests a node's WIDTH child boxes (`_box_test`) and a leaf's up to WIDTH
 triangles (`_leaf_test`) in SIMD lanes through LLVM intrinsics; each lane does exactly the
 float64 operations of the scalar `hit_box` / `hit_triangle`, in the same order.
@@ -305,7 +310,7 @@ def _entry(stack, c):
     return stack[stack.shape[0] - WIDTH // 2 + (c >> 1), c & 1]
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy")
+@nb.njit(cache=True, _nrt=False, error_model="numpy")
 def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     """(t, scene triangle index) of the nearest hit in (0, tmax), or (inf, -1).
 
@@ -385,7 +390,7 @@ def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     return best_t, bvh.tri_index[best]
 
 
-@nb.njit(cache=True, inline="always", error_model="numpy")
+@nb.njit(cache=True, _nrt=False, error_model="numpy")
 def any_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     """True if the ray hits any triangle at a distance in (0, tmax)."""
     bounds, kids, planes = bvh.bounds, bvh.kids, bvh.tri_planes

@@ -245,6 +245,29 @@ def trace_visible_points(
     return VisiblePoints(*vec, hit, pixel, sample, footprint)
 
 
+# A function of its own, called once per pixel, so the `prange` kernel below stays small:
+# Numba's parallel passes over a kernel with the camera chain inlined took 20 s to compile.
+@nb.njit(cache=True, _nrt=False, error_model="numpy")
+def emitted_pixel(bvh, sc, cam, width, height, pix, count, first, seed, eps, stack):
+    """(r, g, b, squared luminance) sums over samples first … first + count - 1 of pixel pix's
+    scrambled Sobol sequence: the radiance of lights seen along their specular chains."""
+    y, x = pix // width, pix % width
+    # the pixel's scramble (stream pix, dimensions its samples' streams never use)
+    shift_x = np.int64(uniform(seed, pix, 0) * 4294967296.0)
+    shift_y = np.int64(uniform(seed, pix, 1) * 4294967296.0)
+    er = eg = eb = 0.0
+    q = 0.0
+    for s in range(count):
+        k = first + s
+        sx, sy = sobol2(k, shift_x, shift_y)
+        stream = (np.int64(pix) << np.int64(32)) | k
+        v = camera_sample(bvh, sc, cam, width, height, x, y, sx, sy, stream, seed, eps, stack)
+        er, eg, eb = er + v[13], eg + v[14], eb + v[15]
+        lum = LUMINANCE[0] * v[13] + LUMINANCE[1] * v[14] + LUMINANCE[2] * v[15]
+        q += lum * lum
+    return er, eg, eb, q
+
+
 @nb.njit(cache=True, parallel=True, error_model="numpy")
 def _emitted_kernel(bvh, depth, sc, cam, width, height, pixels, counts, first, seed, eps, out, sq):
     """out[i], sq[i] = the sums of the emitted radiance and of its squared luminance over
@@ -254,23 +277,10 @@ def _emitted_kernel(bvh, depth, sc, cam, width, height, pixels, counts, first, s
         # Threads take contiguous ranges of t: scattered over the list, each gets a share of
         # the pixels whose chains run long (in glass) and of those that end at once.
         i = (t * SCATTER) % n
-        stack = new_stack(depth)
-        pix = pixels[i]
-        y, x = pix // width, pix % width
-        # the pixel's scramble (stream pix, dimensions its samples' streams never use)
-        shift_x = np.int64(uniform(seed, pix, 0) * 4294967296.0)
-        shift_y = np.int64(uniform(seed, pix, 1) * 4294967296.0)
-        er = eg = eb = 0.0
-        q = 0.0
-        for s in range(counts[i]):
-            k = first[i] + s
-            sx, sy = sobol2(k, shift_x, shift_y)
-            stream = (np.int64(pix) << np.int64(32)) | k
-            v = camera_sample(bvh, sc, cam, width, height, x, y, sx, sy, stream, seed, eps, stack)
-            er, eg, eb = er + v[13], eg + v[14], eb + v[15]
-            lum = LUMINANCE[0] * v[13] + LUMINANCE[1] * v[14] + LUMINANCE[2] * v[15]
-            q += lum * lum
-        out[i, 0], out[i, 1], out[i, 2], sq[i] = er, eg, eb, q
+        out[i, 0], out[i, 1], out[i, 2], sq[i] = emitted_pixel(
+            bvh, sc, cam, width, height, pixels[i], counts[i], first[i], seed, eps,
+            new_stack(depth),
+        )  # fmt: skip
 
 
 def trace_emitted(
