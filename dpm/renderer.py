@@ -18,6 +18,7 @@ import numpy as np
 from tqdm import tqdm
 
 from dpm.camera import Camera
+from dpm.compiling import CompileWatch
 from dpm.denoise import denoise, guides
 from dpm.errors import InputError
 from dpm.methods import method_class, validate
@@ -83,6 +84,16 @@ def render(
     """
     started = time.monotonic() if started is None else started
     options = options or RenderOptions()
+    with CompileWatch(options.progress) as compiling:
+        result = _render(scene, options, started)
+    # Seconds Numba spent compiling kernels inside this render: 0 once the renderer is warm.
+    result.stats["compile_seconds"] = compiling.seconds
+    result.stats["compiled_kernels"] = compiling.kernels
+    return result
+
+
+def _render(scene: Scene, options: RenderOptions, started: float) -> RenderResult:
+    """`render`, given its options and start."""
     validate(options)
     cls = method_class(options.method)
     method = cls(scene, options)

@@ -16,8 +16,9 @@ ROOT = Path(__file__).parents[1] / "dpm"
 
 # Lowest first; a module may import its own layer and those below (docs/design.md).
 LAYERS = {
-    "core": ("dpm.errors", "dpm.clock", "dpm.stopwatch", "dpm.io", "dpm.metrics", "dpm.camera",
-             "dpm.obj", "dpm.options", "dpm.scene", "dpm.mitsuba_xml", "dpm.parallel"),
+    "core": ("dpm.errors", "dpm.clock", "dpm.stopwatch", "dpm.compiling", "dpm.io",
+             "dpm.metrics", "dpm.camera", "dpm.obj", "dpm.options", "dpm.scene",
+             "dpm.mitsuba_xml", "dpm.parallel"),
     "tracer": ("dpm.tracer",),
     "density": ("dpm.density",),
     "nn": ("dpm.nn", "dpm.nn.features", "dpm.nn.fused", "dpm.nn.infer", "dpm.nn.model",
