@@ -21,9 +21,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.ndimage import uniform_filter
 
 from dpm.density.base import luminance
+from dpm.filters import box_mean
 
 ADAPT_AFTER = 8  # passes before the first extra paths (a deviation needs a few paths)
 EXTRA_PER_PIXEL = 0.25  # extra paths per pass, at most, per pixel of the image
@@ -144,8 +144,8 @@ class Halves:
         neighbours' means)."""
         known = np.isfinite(var)
         shape = (self.height, self.width)
-        total = uniform_filter(np.where(known, var, 0.0).reshape(shape), SMOOTH, mode="nearest")
-        share = uniform_filter(known.reshape(shape).astype(np.float64), SMOOTH, mode="nearest")
+        total = box_mean(np.where(known, var, 0.0).reshape(shape), SMOOTH, mode="nearest")
+        share = box_mean(known.reshape(shape).astype(np.float64), SMOOTH, mode="nearest")
         some = share > 0.5 / SMOOTH**2  # at least one finite value (sums round off, not to 0)
         near = np.where(some, total / np.where(some, share, 1.0), 0.0)
         return np.maximum(var, near.ravel())

@@ -39,7 +39,6 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
-from scipy.ndimage import uniform_filter
 from tqdm import tqdm
 
 from dpm.camera import Camera
@@ -49,6 +48,7 @@ from dpm.density.progressive import pass_seed
 from dpm.errors import InputError
 from dpm.estimators.ppm import ALPHA, PPMState, check_progressive
 from dpm.estimators.sppm import sppm_gather
+from dpm.filters import box_mean
 from dpm.methods.adaptive import ADAPT_AFTER, EXTRA_CAP, EXTRA_PER_PIXEL, Halves
 from dpm.methods.base import Method, check_photons
 from dpm.options import RenderOptions
@@ -211,13 +211,12 @@ def spread_sparse(
     out, todo = caustic.copy(), sparse.reshape(h, w).copy()
     for i, size in enumerate(SPREAD_WINDOWS):
         # window means of the sparse pixels: sums over the window / its sparse pixels
-        n = uniform_filter(member, size, mode="constant")
-        found = uniform_filter(photons, size, mode="constant") * size * size
+        n = box_mean(member, size, mode="constant")
+        found = box_mean(photons, size, mode="constant") * size * size
         take = todo & ((found >= SPARSE_PHOTONS) | (i == len(SPREAD_WINDOWS) - 1)) & (n > 0)
         if take.any():
             mean = (
-                uniform_filter(values, (size, size, 1), mode="constant")
-                / np.maximum(n, 1e-30)[..., None]
+                box_mean(values, (size, size, 1), mode="constant") / np.maximum(n, 1e-30)[..., None]
             )
             out.reshape(h, w, 3)[take] = mean[take]
             todo &= ~take

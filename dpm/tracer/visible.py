@@ -17,9 +17,9 @@ from dataclasses import dataclass, fields
 
 import numba as nb
 import numpy as np
-from scipy.ndimage import binary_dilation
 
 from dpm.camera import Camera
+from dpm.filters import dilate3
 from dpm.scene import DIELECTRIC, DIFFUSE, Scene
 from dpm.tracer.bsdf import (
     fresnel_dielectric,
@@ -328,5 +328,5 @@ def specular_pixels(scene: Scene, bvh: BVH, camera: Camera) -> np.ndarray:
         bvh.arrays, bvh.depth, scene.kernel_arrays(), camera.basis(), camera.width,
         camera.height, out,
     )  # fmt: skip
-    grown = binary_dilation(out.reshape(camera.height, camera.width), np.ones((3, 3), bool))
+    grown = dilate3(out.reshape(camera.height, camera.width))
     return grown.ravel()
