@@ -25,7 +25,7 @@ from dpm.options import COMPONENTS, cli_fields, default_text, flag
 if TYPE_CHECKING:
     from dpm.options import RenderOptions
 
-FIRST_RUN = "about 3 minutes on 2 cores"  # 179 s for the Quick start: benchmarks/cold_start.py
+FIRST_RUN = "about a minute and a half on 2 cores"  # 83 s, Quick start: benchmarks/cold_start.py
 
 
 class _Parser(argparse.ArgumentParser):
