@@ -17,8 +17,8 @@ import numpy as np
 
 from dpm.errors import InputError
 
-# Statements that carry nothing dpm renders (texture coordinates, normals, grouping, smoothing).
-_OBJ_IGNORED = {"vt", "vn", "vp", "o", "g", "s", "l", "p", "mg"}
+# Statements that carry nothing dpm renders (normals, grouping, smoothing, lines, points).
+_OBJ_IGNORED = {"vn", "vp", "o", "g", "s", "l", "p", "mg"}
 _MTL_IGNORED = {
     "Ns",
     "Ka",
@@ -44,6 +44,8 @@ class ObjMesh:
     face_material: np.ndarray  # (T,) int32 index into material_names, -1 = no usemtl
     material_names: list[str] = field(default_factory=list)
     mtllibs: list[Path] = field(default_factory=list)
+    texcoords: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # (N, 2) vt u, v
+    face_texcoords: np.ndarray | None = None  # (T, 3) int64 indices into texcoords, -1: none
 
 
 @dataclass
@@ -57,6 +59,7 @@ class MtlEntry:
     tf: tuple[float, float, float] | None = None
     ni: float | None = None
     illum: int | None = None
+    map_kd: Path | None = None  # diffuse colour texture, multiplies Kd (the MTL convention)
 
 
 def _read_lines(path: Path) -> list[str]:
@@ -99,7 +102,9 @@ def _rgb(path: Path, lineno: int, words: list[str]) -> tuple[float, float, float
 def read_obj(path: Path) -> ObjMesh:
     """Parse an OBJ file into vertices (V,3), triangles (T,3) and per-triangle material names."""
     vertices: list[list[float]] = []
+    texcoords: list[list[float]] = []
     faces: list[tuple[int, int, int]] = []
+    face_uv: list[tuple[int, int, int]] = []
     face_material: list[int] = []
     names: list[str] = []
     name_index: dict[str, int] = {}
@@ -118,21 +123,41 @@ def read_obj(path: Path) -> ObjMesh:
             if not all(math.isfinite(x) for x in vertex):
                 raise InputError(f"{path}:{lineno}: vertex coordinate is NaN or infinite")
             vertices.append(vertex)
+        elif key == "vt":
+            if len(words) < 2:
+                raise InputError(f"{path}:{lineno}: 'vt' needs a texture coordinate")
+            try:
+                uv = [float(w) for w in words[1:3]] + [0.0] * (3 - len(words[:3]))
+            except ValueError:
+                raise InputError(f"{path}:{lineno}: texture coordinate is not a number") from None
+            if not all(math.isfinite(x) for x in uv):
+                raise InputError(f"{path}:{lineno}: texture coordinate is NaN or infinite")
+            texcoords.append(uv)
         elif key == "f":
             if len(words) < 4:
                 raise InputError(f"{path}:{lineno}: face needs at least 3 vertices")
-            idx = []
+            idx, uvs = [], []
             for w in words[1:]:
+                parts = w.split("/")
                 try:
-                    i = int(w.split("/", 1)[0])
+                    i = int(parts[0])
+                    t = int(parts[1]) if len(parts) > 1 and parts[1] else None
                 except ValueError:
                     raise InputError(f"{path}:{lineno}: bad face vertex '{w}'") from None
                 i = i - 1 if i > 0 else len(vertices) + i
                 if i < 0 or i >= len(vertices):
                     raise InputError(f"{path}:{lineno}: face vertex '{w}' out of range")
+                if t is not None:
+                    t = t - 1 if t > 0 else len(texcoords) + t
+                    if t < 0 or t >= len(texcoords):  # no such vt: an error only if textured
+                        t = None
                 idx.append(i)
+                uvs.append(-1 if t is None else t)
+            if -1 in uvs:
+                uvs = [-1] * len(uvs)  # all or none: a face's texture needs its three corners
             for j in range(1, len(idx) - 1):  # fan triangulation, keeps the winding
                 faces.append((idx[0], idx[j], idx[j + 1]))
+                face_uv.append((uvs[0], uvs[j], uvs[j + 1]))
                 face_material.append(current)
         elif key == "usemtl":
             if len(words) < 2:
@@ -153,6 +178,8 @@ def read_obj(path: Path) -> ObjMesh:
         face_material=np.asarray(face_material, dtype=np.int32),
         material_names=names,
         mtllibs=mtllibs,
+        texcoords=np.asarray(texcoords, dtype=np.float64).reshape(-1, 2),
+        face_texcoords=np.asarray(face_uv, dtype=np.int64).reshape(-1, 3),
     )
 
 
@@ -171,6 +198,13 @@ def read_mtl(path: Path) -> dict[str, MtlEntry]:
                 raise InputError(f"{path}:{lineno}: newmtl needs a name")
             entry = MtlEntry(name=" ".join(words[1:]))
             entries[entry.name] = entry
+            continue
+        if key == "map_Kd" and entry is not None:
+            if len(words) < 2:
+                raise InputError(f"{path}:{lineno}: map_Kd needs a file name")
+            if len(words) > 2:  # options (-s, -o, -bm, ...) come before the file name
+                ignored.setdefault(f"map_Kd {' '.join(words[1:-1])}", lineno)
+            entry.map_kd = path.parent / words[-1]
             continue
         if key in _MTL_IGNORED or key.startswith(("map_", "bump", "disp", "decal", "refl", "norm")):
             ignored.setdefault(key, lineno)

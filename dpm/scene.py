@@ -21,6 +21,7 @@ from dpm.camera import Camera, framing_camera, make_camera
 from dpm.errors import InputError
 from dpm.obj import MtlEntry, read_mtl, read_obj
 from dpm.options import sidecar_types
+from dpm.textures import Textures, pack_textures
 
 DIFFUSE, MIRROR, DIELECTRIC = 0, 1, 2
 KIND_NAMES = ("diffuse", "mirror", "dielectric")
@@ -37,6 +38,7 @@ class Materials:
     emission: np.ndarray  # (M, 3) float32 emitted radiance Ke (W m^-2 sr^-1)
     ior: np.ndarray  # (M,) float32 index of refraction inside a dielectric
     transmittance: np.ndarray  # (M, 3) float32 Tf, applied at every refraction
+    textures: Textures | None = None  # diffuse colour textures (map_Kd), multiplying albedo
 
 
 @dataclass(frozen=True)
@@ -70,6 +72,10 @@ class SceneArrays(NamedTuple):
     emitter_triangles: np.ndarray  # (E,) int32
     emitter_cdf: np.ndarray  # (E,) float64
     emitter_pdf: np.ndarray  # (T,) float64 area density of light sampling (0: not an emitter)
+    uvs: np.ndarray  # (T, 3, 2) float32 texture coordinates of each triangle's corners
+    texture: np.ndarray  # (M,) int32 texture of each material, -1: none
+    texels: np.ndarray  # (N, 3) float32 linear RGB of every texture
+    texture_dims: np.ndarray  # (K, 3) int64 first texel, width, height
 
 
 @dataclass(frozen=True)
@@ -85,6 +91,7 @@ class Scene:
     emitters: Emitters
     camera: Camera
     render_defaults: dict[str, object] = field(default_factory=dict)
+    uvs: np.ndarray | None = None  # (T, 3, 2) float32 texture coordinates (None: no textures)
 
     @cached_property
     def bounds(self) -> np.ndarray:
@@ -95,6 +102,13 @@ class Scene:
     def kernel_arrays(self) -> SceneArrays:
         """The scene as a tuple of plain arrays for Numba kernels."""
         m, e = self.materials, self.emitters
+        tex = m.textures or Textures(
+            np.full(len(m.kind), -1, np.int32), np.zeros((1, 3), np.float32),
+            np.zeros((1, 3), np.int64),
+        )  # fmt: skip
+        uvs = self.uvs
+        if uvs is None:
+            uvs = np.zeros((len(self.triangles), 3, 2), np.float32)
         return SceneArrays(
             self.triangles,
             self.normals,
@@ -109,6 +123,10 @@ class Scene:
             e.triangles,
             e.cdf,
             self.emitter_pdf,
+            uvs,
+            tex.index,
+            tex.texels,
+            tex.dims,
         )
 
     @cached_property
@@ -129,7 +147,7 @@ class Scene:
 
 def material_table(names: list[str], library: dict[str, MtlEntry], obj_path: Path) -> Materials:
     """The material table of `names` ("": the default diffuse) from MTL entries."""
-    kinds, albedo, specular, emission, ior, tf = [], [], [], [], [], []
+    kinds, albedo, specular, emission, ior, tf, maps = [], [], [], [], [], [], []
     for name in names:
         if name == "":
             entry = MtlEntry(name="")  # faces before any usemtl: default diffuse
@@ -151,6 +169,7 @@ def material_table(names: list[str], library: dict[str, MtlEntry], obj_path: Pat
         emission.append(ke)
         ior.append(entry.ni if entry.ni is not None else 1.5)
         tf.append(entry.tf or (1.0,) * 3)
+        maps.append(entry.map_kd if kind == DIFFUSE else None)
     f32 = np.float32
     return Materials(
         names=tuple(names),
@@ -160,6 +179,7 @@ def material_table(names: list[str], library: dict[str, MtlEntry], obj_path: Pat
         emission=np.asarray(emission, dtype=f32).reshape(-1, 3),
         ior=np.asarray(ior, dtype=f32),
         transmittance=np.asarray(tf, dtype=f32).reshape(-1, 3),
+        textures=pack_textures(maps),
     )
 
 
@@ -257,7 +277,17 @@ def load_scene(path: str | Path) -> Scene:
     if len(mesh.faces) == 0:
         raise InputError(f"{path}: the scene has no faces")
     materials = material_table(names, library, path)
-    return build_scene(path, mesh.vertices[mesh.faces], face_material, materials, None, None)
+    uvs = None
+    if materials.textures is not None:
+        textured = materials.textures.index[face_material] >= 0
+        missing = textured & np.any(mesh.face_texcoords < 0, axis=1)
+        if missing.any():
+            line = f"{np.count_nonzero(missing)} face(s) of a textured material"
+            raise InputError(f"{path}: {line} have no texture coordinates (f v/vt ...)")
+        corner = mesh.face_texcoords
+        coords = mesh.texcoords if len(mesh.texcoords) else np.zeros((1, 2))
+        uvs = np.where(corner[..., None] >= 0, coords[np.maximum(corner, 0)], 0.0)
+    return build_scene(path, mesh.vertices[mesh.faces], face_material, materials, None, None, uvs)
 
 
 def build_scene(
@@ -267,10 +297,12 @@ def build_scene(
     materials: Materials,
     camera: Camera | None,
     render: dict[str, object] | None,
+    uvs: np.ndarray | None = None,
 ) -> Scene:
     """A validated Scene from float64 triangles (T, 3, 3) (counter-clockwise = front), their
     material indices (T,) into `materials`, and a camera and [render] defaults (None: those of
-    the TOML sidecar beside `path`, or a camera framing the scene)."""
+    the TOML sidecar beside `path`, or a camera framing the scene); with textured materials,
+    the texture coordinates of the triangles' corners uvs (T, 3, 2)."""
     with np.errstate(invalid="ignore", over="ignore"):  # beyond float32: dropped below
         tri = tri64.astype(np.float32)
         keep, cross, double_area = _valid_triangles(tri, tri64)
@@ -307,4 +339,5 @@ def build_scene(
         emitters=emitters,
         camera=camera,
         render_defaults=dict(render or {}),
+        uvs=None if uvs is None else np.ascontiguousarray(uvs[keep], dtype=np.float32),
     )

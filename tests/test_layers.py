@@ -18,7 +18,7 @@ ROOT = Path(__file__).parents[1] / "dpm"
 LAYERS = {
     "core": ("dpm.errors", "dpm.clock", "dpm.stopwatch", "dpm.compiling", "dpm.io",
              "dpm.metrics", "dpm.camera", "dpm.obj", "dpm.options", "dpm.scene",
-             "dpm.mitsuba_xml", "dpm.parallel", "dpm.filters"),
+             "dpm.mitsuba_xml", "dpm.parallel", "dpm.filters", "dpm.textures"),
     "tracer": ("dpm.tracer",),
     "density": ("dpm.density",),
     "nn": ("dpm.nn", "dpm.nn.features", "dpm.nn.fused", "dpm.nn.infer", "dpm.nn.model",

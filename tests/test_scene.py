@@ -45,7 +45,7 @@ newmtl plain
 newmtl red
 Kd 0.7 0.1 0.1
 Ns 10
-map_Kd ignored.png
+map_Ks ignored.png
 newmtl mirror3
 illum 3
 newmtl mirror5
@@ -66,11 +66,11 @@ Ke 4 2 1
 
 
 def test_every_material_kind(tmp_path: Path) -> None:
-    with pytest.warns(UserWarning) as caught:  # Ns and map_Kd: one line each
+    with pytest.warns(UserWarning) as caught:  # Ns and map_Ks: one line each
         scene = load_scene(write_scene(tmp_path, ALL_KINDS_OBJ, ALL_KINDS_MTL))
     assert sorted(str(w.message).split(": ", 1)[1] for w in caught) == [
         "MTL key 'Ns' ignored",
-        "MTL key 'map_Kd' ignored",
+        "MTL key 'map_Ks' ignored",
     ]
     assert all(str(w.message).startswith(f"{tmp_path / 'scene.mtl'}:") for w in caught)
     m = scene.materials

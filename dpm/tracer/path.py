@@ -23,7 +23,7 @@ from dpm.tracer.bvh import BVH
 from dpm.tracer.lights import light_pdf_solid_angle, sample_light_point
 from dpm.tracer.photon_grid import PhotonGrid, grid_irradiance
 from dpm.tracer.sampling import sample_cosine, uniform
-from dpm.tracer.surface import next_surface
+from dpm.tracer.surface import albedo_at, next_surface
 from dpm.tracer.traverse import any_hit, new_stack, spawn_offset
 from dpm.tracer.visible import (
     LUMINANCE,
@@ -154,7 +154,8 @@ def shade_path(
                 lg += bg * e[1] * w
                 lb += bb * e[2] * w
             if sc.kind[m] == DIFFUSE:
-                br, bg, bb = br * sc.albedo[m, 0], bg * sc.albedo[m, 1], bb * sc.albedo[m, 2]
+                ar, ag, ab = albedo_at(sc, m, tri, px, py, pz)
+                br, bg, bb = br * ar, bg * ag, bb * ab
                 found = True
                 break
             dim = SHADE_DIM0 + DIMS_PER_VERTEX * vertex

@@ -26,7 +26,7 @@ from dpm.tracer.bsdf import scatter_specular, specular_survival
 from dpm.tracer.bvh import BVH
 from dpm.tracer.lights import sample_light_point
 from dpm.tracer.sampling import orthonormal_basis, sample_cosine, uniform
-from dpm.tracer.surface import next_surface
+from dpm.tracer.surface import albedo_at, next_surface
 from dpm.tracer.traverse import new_stack, spawn_offset
 from dpm.tracer.visible import RR_SPECULAR
 
@@ -175,11 +175,11 @@ def photon_kernel(
                 if caustic_only or count[j] == MAX_STORED:
                     break  # caustic_only: no later photon of this path can be a caustic one
                 # Russian roulette by the albedo keeps the flux of surviving photons unchanged.
-                a = sc.albedo[m]
-                q = max(a[0], a[1], a[2])
+                ar, ag, ab = albedo_at(sc, m, tri, px, py, pz)
+                q = max(ar, ag, ab)
                 if b == MAX_BOUNCES or uniform(seed, stream, dim) >= q:
                     break
-                fr, fg, fb = fr * a[0] / q, fg * a[1] / q, fb * a[2] / q
+                fr, fg, fb = fr * ar / q, fg * ag / q, fb * ab / q
                 dx, dy, dz = sample_cosine(
                     nx, ny, nz, uniform(seed, stream, dim + 1), uniform(seed, stream, dim + 2)
                 )

@@ -30,7 +30,7 @@ from dpm.tracer.bsdf import (
 )
 from dpm.tracer.bvh import BVH
 from dpm.tracer.sampling import sobol2, uniform
-from dpm.tracer.surface import next_surface
+from dpm.tracer.surface import albedo_at, next_surface
 from dpm.tracer.traverse import hit_triangle, new_stack, ray_setup, spawn_offset
 
 # Specular vertices a camera path may pass before it is dropped. Clear glass traps some
@@ -129,11 +129,8 @@ def camera_sample(bvh, sc, cam, width, height, x, y, sx, sy, stream, seed, eps, 
             eg += tg * sc.emission[m, 1]
             eb += tb * sc.emission[m, 2]
         if sc.kind[m] == DIFFUSE:
-            a = sc.albedo[m]
-            return (
-                True, px, py, pz, nx, ny, nz, np.float64(a[0]), np.float64(a[1]),
-                np.float64(a[2]), tr, tg, tb, er, eg, eb,
-            )  # fmt: skip
+            ar, ag, ab = albedo_at(sc, m, tri, px, py, pz)
+            return True, px, py, pz, nx, ny, nz, ar, ag, ab, tr, tg, tb, er, eg, eb
         if vertex == MAX_SPECULAR_DEPTH:
             break
         if vertex >= RR_SPECULAR:

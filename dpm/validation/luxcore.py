@@ -138,6 +138,8 @@ def meshes(scene: Scene) -> dict[int, tuple[np.ndarray, np.ndarray]]:
 def scene_properties(scene: Scene, camera: Camera) -> dict[str, object]:
     """LuxCore scene properties (materials, objects `obj<m>` on meshes `mesh<m>`, camera)."""
     mats = scene.materials
+    if mats.textures is not None:
+        raise InputError(f"{scene.path}: textured materials are not converted to LuxCore")
     props: dict[str, object] = {}
     for m in meshes(scene):
         key = f"scene.materials.mat{m}"

@@ -82,6 +82,8 @@ def _bsdf(scene: Scene, m: int) -> dict:
 
 def mitsuba_scene(scene: Scene, camera: Camera, spp: int, folder: Path) -> dict:
     """A Mitsuba scene dictionary for `scene` seen by `camera`; meshes are written to folder."""
+    if scene.materials.textures is not None:
+        raise InputError(f"{scene.path}: textured materials are not converted to Mitsuba")
     mi = load_mitsuba()
     desc: dict = {
         "type": "scene",
