@@ -9,8 +9,8 @@ settings dpm chooses itself, which get one warning line each):
   sphere is exact), each with `to_world` (`matrix`, `translate`, `scale`, `rotate`, `lookat`)
   and `flip_normals`;
 - bsdfs `diffuse` (`reflectance`), `conductor` and `roughconductor`-free `conductor` as a
-  perfect mirror (`specular_reflectance`), `dielectric` (`int_ior`, `ext_ior` = 1,
-  `specular_transmittance`), `twosided` around one of those, by `id` and `<ref>`;
+  perfect mirror (`specular_reflectance`), `dielectric` and `thindielectric` (`int_ior`,
+  `ext_ior` = 1, `specular_transmittance`), `twosided` around one of those, by `id` and `<ref>`;
 - `area` emitters (`radiance`) on shapes: one-sided, from the side the normal points to;
 - the `perspective` sensor (`fov`, `fov_axis` x or y, `to_world`) and its `hdrfilm`'s width
   and height; its sampler, reconstruction filter and the integrator are dpm's own choice.
@@ -196,14 +196,16 @@ class _Reader:
             return MtlEntry(name, kd=p.get("reflectance", (DEFAULT_REFLECTANCE,) * 3))
         if kind == "conductor":
             return MtlEntry(name, ks=p.get("specular_reflectance", (1.0,) * 3), illum=3)
-        if kind == "dielectric":
+        if kind in ("dielectric", "thindielectric"):
             ext = self.ior(element, p.get("ext_ior", 1.0))
             ior = self.ior(element, p.get("int_ior", DEFAULT_IOR))
             if abs(ext - 1.0) > 1e-3:
                 raise self.fail(element, "only ext_ior = 1 (air outside) is supported")
             tf = p.get("specular_transmittance", (1.0,) * 3)
-            return MtlEntry(name, ni=float(ior), tf=tf, illum=7)
-        raise self.fail(element, "unsupported bsdf (diffuse, conductor, dielectric, twosided)")
+            return MtlEntry(name, ni=float(ior), tf=tf, illum=7, thin=kind == "thindielectric")
+        raise self.fail(
+            element, "unsupported bsdf (diffuse, conductor, dielectric, thindielectric, twosided)"
+        )
 
     def ior(self, element: ET.Element, value: object) -> float:
         """An index of refraction: a number or one of Mitsuba's names (IORS)."""

@@ -60,6 +60,7 @@ class MtlEntry:
     ni: float | None = None
     illum: int | None = None
     map_kd: Path | None = None  # diffuse colour texture, multiplies Kd (the MTL convention)
+    thin: bool = False  # a thin dielectric sheet (Ni, Tf): Mitsuba XML's thindielectric only
 
 
 def _read_lines(path: Path) -> list[str]:

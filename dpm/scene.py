@@ -1,7 +1,9 @@
 """Scenes: loading OBJ + MTL + TOML sidecar into flat float32 arrays, with validation.
 
 See docs/design.md "Scene format". Material kinds: DIFFUSE (two-sided Lambertian), MIRROR (two-sided
-perfect mirror with reflectance Ks), DIELECTRIC (smooth, IOR Ni inside, air on the front side).
+perfect mirror with reflectance Ks), DIELECTRIC (smooth, IOR Ni inside, air on the front side),
+THIN (a thin dielectric sheet, air on both sides: Fresnel reflection with the bounces inside
+summed, straight transmission; Mitsuba's `thindielectric`, read from XML scenes only).
 Any material with non-zero Ke is also a one-sided Lambertian emitter (front face).
 """
 
@@ -23,8 +25,8 @@ from dpm.obj import MtlEntry, read_mtl, read_obj
 from dpm.options import sidecar_types
 from dpm.textures import Textures, pack_textures
 
-DIFFUSE, MIRROR, DIELECTRIC = 0, 1, 2
-KIND_NAMES = ("diffuse", "mirror", "dielectric")
+DIFFUSE, MIRROR, DIELECTRIC, THIN = 0, 1, 2, 3
+KIND_NAMES = ("diffuse", "mirror", "dielectric", "thin dielectric")
 
 
 @dataclass(frozen=True)
@@ -32,7 +34,7 @@ class Materials:
     """Material table, one row per material (struct of arrays)."""
 
     names: tuple[str, ...]
-    kind: np.ndarray  # (M,) int32: DIFFUSE, MIRROR or DIELECTRIC
+    kind: np.ndarray  # (M,) int32: DIFFUSE, MIRROR, DIELECTRIC or THIN
     albedo: np.ndarray  # (M, 3) float32 Lambertian reflectance Kd
     specular: np.ndarray  # (M, 3) float32 mirror reflectance Ks
     emission: np.ndarray  # (M, 3) float32 emitted radiance Ke (W m^-2 sr^-1)
@@ -157,7 +159,9 @@ def material_table(names: list[str], library: dict[str, MtlEntry], obj_path: Pat
             raise InputError(f"{obj_path}: material '{name}' is not defined in any mtllib")
         ke = entry.ke or (0.0, 0.0, 0.0)
         emissive = any(v > 0 for v in ke)
-        if entry.illum in (3, 5):
+        if entry.thin:
+            kind = THIN
+        elif entry.illum in (3, 5):
             kind = MIRROR
         elif entry.illum in (4, 6, 7):
             kind = DIELECTRIC

@@ -213,3 +213,54 @@ def test_mitsuba_renders_the_same_xml_to_the_same_image_mean(tmp_path: Path) -> 
     spread = abs(means[0] - means[1]) + abs(means[2] - means[3])  # each side's own noise
     difference = abs((means[0] + means[1]) - (means[2] + means[3])) / 2
     assert difference < max(3 * spread, 0.01 * np.mean(means)), means
+
+
+# A light of radiance 1 filling the view, seen through a thin sheet of glass at normal
+# incidence (Mitsuba's thindielectric): T' = 1 - 2F/(1+F) of it comes through.
+THIN_SHEET = """<scene version="3.0.0">
+    <shape type="rectangle">
+        <transform name="to_world"><scale value="4"/><translate z="-2"/></transform>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0"/></bsdf>
+        <emitter type="area"><rgb name="radiance" value="1"/></emitter>
+    </shape>
+    <shape type="rectangle">
+        <transform name="to_world"><scale value="4"/></transform>
+        <bsdf type="thindielectric"><float name="int_ior" value="1.5"/>
+            <rgb name="specular_transmittance" value="1, 0.5, 0.25"/></bsdf>
+    </shape>
+    <sensor type="perspective">
+        <float name="fov" value="2"/>
+        <transform name="to_world"><lookat origin="0, 0, 6" target="0, 0, 0" up="0, 1, 0"/>
+        </transform>
+        <film type="hdrfilm"><integer name="width" value="16"/>
+            <integer name="height" value="16"/></film>
+    </sensor>
+</scene>
+"""
+
+
+def test_a_thin_sheet_passes_one_minus_its_summed_reflection(tmp_path: Path) -> None:
+    (tmp_path / "thin.xml").write_text(THIN_SHEET)
+    scene = dpm.load_file(tmp_path / "thin.xml")
+    assert dpm.scene.KIND_NAMES[scene.materials.kind[1]] == "thin dielectric"
+    f = ((1.5 - 1) / (1.5 + 1)) ** 2  # Fresnel at normal incidence
+    through = 1 - 2 * f / (1 + f)
+    image = dpm.render(scene, "pt", spp=256, progress=False)
+    mean = image.reshape(-1, 3).mean(axis=0)
+    # each sample passes (weight Tf) or reflects into the dark: a Bernoulli mean over 65,536
+    err = 4 * np.sqrt(through * (1 - through) / image[..., 0].size / 256)
+    assert np.allclose(mean, through * np.array([1, 0.5, 0.25]), atol=err), mean
+
+
+@pytest.mark.validation
+def test_mitsuba_agrees_on_the_thin_sheet(tmp_path: Path) -> None:
+    """Mitsuba 3's thindielectric passes the same share of the light as dpm's thin sheet."""
+    from dpm.validation.mitsuba import load_mitsuba
+
+    mi = load_mitsuba()
+    (tmp_path / "thin.xml").write_text(THIN_SHEET)
+    ours = dpm.render(dpm.load_file(tmp_path / "thin.xml"), "pt", spp=256, progress=False)
+    scene, path = mi.load_file(str(tmp_path / "thin.xml")), mi.load_dict({"type": "path"})
+    theirs = np.array(mi.render(scene, spp=256, seed=1, integrator=path))
+    a, b = ours.reshape(-1, 3).mean(axis=0), theirs.reshape(-1, 3).mean(axis=0)
+    assert np.allclose(a, b, rtol=0.02), (a, b)

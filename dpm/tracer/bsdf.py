@@ -1,4 +1,5 @@
-"""Specular scattering: mirror reflection and the smooth dielectric (exact Fresnel)."""
+"""Specular scattering: mirror reflection, the smooth dielectric (exact Fresnel) and the thin
+dielectric sheet."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import math
 
 import numba as nb
 
-from dpm.scene import DIELECTRIC, MIRROR
+from dpm.scene import DIELECTRIC, MIRROR, THIN
 
 
 @nb.njit(cache=True, inline="always")
@@ -46,10 +47,20 @@ def scatter_specular(sc, m, dx, dy, dz, nx, ny, nz, cos_i, front, u, radiance):
     outside of a dielectric. A dielectric reflects with probability F (Fresnel), so the weight
     is Tf for refraction and 1 for reflection, times (η₁/η₂)² on radiance paths only. side is
     +1 when the new ray leaves on the incoming side (offset along n), -1 when it crosses.
+    A thin sheet reflects with probability R' = 2F/(1+F), F's reflection plus every path that
+    bounces inside and leaves on the incoming side (as Mitsuba's `thindielectric`), and
+    otherwise passes straight through with weight Tf (air on both sides: no η² scale).
     """
     if sc.kind[m] == MIRROR:
         rx, ry, rz = reflect(dx, dy, dz, nx, ny, nz)
         return rx, ry, rz, sc.specular[m, 0], sc.specular[m, 1], sc.specular[m, 2], 1.0
+    if sc.kind[m] == THIN:
+        f, _ = fresnel_dielectric(cos_i, sc.ior[m])
+        if u < 2.0 * f / (1.0 + f):
+            rx, ry, rz = reflect(dx, dy, dz, nx, ny, nz)
+            return rx, ry, rz, 1.0, 1.0, 1.0, 1.0
+        tf = sc.transmittance[m]
+        return dx, dy, dz, tf[0], tf[1], tf[2], -1.0
     eta = sc.ior[m] if front else 1.0 / sc.ior[m]
     f, cos_t = fresnel_dielectric(cos_i, eta)
     if u < f:

@@ -72,7 +72,7 @@ import numpy as np
 from dpm.camera import Camera
 from dpm.clock import process_started
 from dpm.errors import InputError
-from dpm.scene import DIELECTRIC, MIRROR, Scene
+from dpm.scene import DIELECTRIC, MIRROR, THIN, Scene
 
 MAX_DEPTH = 64  # eye and photon path depth ("unbounded" in Mitsuba; RR ends paths)
 RADIUS_FOOTPRINTS = 1.0  # initial caustic lookup radius, in pixel widths at the camera target
@@ -145,9 +145,9 @@ def scene_properties(scene: Scene, camera: Camera) -> dict[str, object]:
         key = f"scene.materials.mat{m}"
         if mats.kind[m] == MIRROR:
             props |= {f"{key}.type": "mirror", f"{key}.kr": _floats(mats.specular[m])}
-        elif mats.kind[m] == DIELECTRIC:
+        elif mats.kind[m] in (DIELECTRIC, THIN):
             props |= {
-                f"{key}.type": "glass",
+                f"{key}.type": "glass" if mats.kind[m] == DIELECTRIC else "archglass",
                 f"{key}.kr": [1.0, 1.0, 1.0],
                 f"{key}.kt": _floats(mats.transmittance[m]),
                 f"{key}.interiorior": float(mats.ior[m]),
@@ -296,7 +296,7 @@ class _UpdateClock:
 def has_specular(scene: Scene) -> bool:
     """Whether some triangle is a mirror or dielectric (else a caustic cache has nothing)."""
     used = np.unique(scene.material)
-    return bool(np.isin(scene.materials.kind[used], (MIRROR, DIELECTRIC)).any())
+    return bool(np.isin(scene.materials.kind[used], (MIRROR, DIELECTRIC, THIN)).any())
 
 
 def render_in_process(

@@ -23,7 +23,7 @@ import numpy as np
 
 from dpm.camera import Camera
 from dpm.errors import InputError
-from dpm.scene import DIELECTRIC, MIRROR, Scene
+from dpm.scene import DIELECTRIC, MIRROR, THIN, Scene
 
 VARIANT = "scalar_rgb"  # runs anywhere; llvm_ad_rgb needs a libLLVM
 
@@ -70,9 +70,9 @@ def _bsdf(scene: Scene, m: int) -> dict:
             "specular_reflectance": _rgb(mats.specular[m]),
         }
         return {"type": "twosided", "bsdf": conductor}
-    if mats.kind[m] == DIELECTRIC:
+    if mats.kind[m] in (DIELECTRIC, THIN):
         return {
-            "type": "dielectric",
+            "type": "dielectric" if mats.kind[m] == DIELECTRIC else "thindielectric",
             "int_ior": float(mats.ior[m]),
             "ext_ior": 1.0,
             "specular_transmittance": _rgb(mats.transmittance[m]),
