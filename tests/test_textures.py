@@ -6,7 +6,7 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from conftest import write_scene
+from conftest import FLOOR_AND_LIGHT_OBJ, write_scene
 from dpm import load_file
 from dpm.cli import render_main
 from dpm.errors import InputError
@@ -15,25 +15,10 @@ from dpm.renderer import RenderOptions, render
 from dpm.textures import srgb_to_linear
 
 # The floor of conftest's scene with texture coordinates: u along x, v along z.
-TEXTURED_OBJ = """\
-mtllib scene.mtl
-v -1 0 -1
-v 1 0 -1
-v 1 0 1
-v -1 0 1
-v -0.1 1 -0.1
-v 0.1 1 -0.1
-v 0.1 1 0.1
-v -0.1 1 0.1
-vt 0 1
-vt 1 1
-vt 1 0
-vt 0 0
-usemtl floor
-f 1/1 4/4 3/3 2/2
-usemtl light
-f 5 6 7 8
-"""
+TEXTURED_OBJ = FLOOR_AND_LIGHT_OBJ.replace(
+    "usemtl floor\nf 1 4 3 2",
+    "vt 0 1\nvt 1 1\nvt 1 0\nvt 0 0\nusemtl floor\nf 1/1 4/4 3/3 2/2",
+)
 CAMERA = """\
 [camera]
 origin = [0, 3, 0]
