@@ -74,7 +74,7 @@ class SceneArrays(NamedTuple):
     emitter_triangles: np.ndarray  # (E,) int32
     emitter_cdf: np.ndarray  # (E,) float64
     emitter_pdf: np.ndarray  # (T,) float64 area density of light sampling (0: not an emitter)
-    uvs: np.ndarray  # (T, 3, 2) float32 texture coordinates of each triangle's corners
+    uvs: np.ndarray  # (T, 3, 2) float32 texture coordinates of the corners ((1, 3, 2): none)
     texture: np.ndarray  # (M,) int32 texture of each material, -1: none
     texels: np.ndarray  # (N, 3) float32 linear RGB of every texture
     texture_dims: np.ndarray  # (K, 3) int64 first texel, width, height
@@ -108,9 +108,9 @@ class Scene:
             np.full(len(m.kind), -1, np.int32), np.zeros((1, 3), np.float32),
             np.zeros((1, 3), np.int64),
         )  # fmt: skip
-        uvs = self.uvs
-        if uvs is None:
-            uvs = np.zeros((len(self.triangles), 3, 2), np.float32)
+        # Without textures the kernels never read uvs: one placeholder row, not (T, 3, 2) zeros
+        # allocated for every kernel call.
+        uvs = self.uvs if self.uvs is not None else np.zeros((1, 3, 2), np.float32)
         return SceneArrays(
             self.triangles,
             self.normals,
