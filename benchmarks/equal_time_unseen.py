@@ -49,7 +49,7 @@ import numpy as np
 from equal_time import MITSUBA_PRELUDE, dpm_run, mitsuba_setup
 
 sys.path.insert(0, str(Path(__file__).parent / "scenes"))
-from make_unseen import CONTROLS, UNSEEN, unseen_scenes  # noqa: E402
+from make_unseen import CONTROLS, UNSEEN, unit_scale, unseen_scenes  # noqa: E402
 from unseen_references import OUT as REFERENCES  # noqa: E402
 from unseen_references import mitsuba_variant  # noqa: E402
 
@@ -116,6 +116,21 @@ def reference_file(name: str, camera_width: int) -> tuple[int, int, Path]:
     return found.get(min(camera_width, MAX_WIDTH)) or next(iter(found.values()))
 
 
+def scoring_reference(name: str, camera_width: int) -> tuple[int, int, Path, Path | None]:
+    """(W, H, reference EXR, the scene's own reference EXR where that is another) that scene
+    `name` is scored against: a uniformly scaled copy's is its scale-1 twin's (the same image
+    by physics: every length scaled, radiance kept), since a renderer's float precision at
+    scale 0.01 is part of what the copy tests, and a reference rendered at that scale shares
+    its renderer's error there (Mitsuba's at 0.01 moves the spheres' focal caustics)."""
+    width, height, own = reference_file(name, camera_width)
+    twin = unit_scale(name)
+    if twin == name:
+        return width, height, own, None
+    w, h, path = reference_file(twin, camera_width)
+    assert (w, h) == (width, height), f"{name}: {twin}'s reference is {w}x{h}"
+    return width, height, path, own
+
+
 def mitsuba_timebox(
     desc: Path, variant: str, budget: float, reserve: float, seed: int, batch_spp: int = BATCH_SPP
 ) -> tuple[np.ndarray, np.ndarray, float, dict]:
@@ -146,9 +161,10 @@ def run_scene(name: str, times: list[float], variant: str, batch_spp: int = BATC
     """Both renderers at each budget on scene `name`; errors, seconds, spp and load."""
     path = {p.stem: p for p in unseen_scenes()}[name]
     scene = load_scene(path)
-    width, height, ref_path = reference_file(name, scene.camera.width)
+    width, height, ref_path, own_path = scoring_reference(name, scene.camera.width)
     camera = scene.camera.with_resolution(width, height)
     ref = read_exr(ref_path)
+    own = None if own_path is None else read_exr(own_path)
     noise = json.loads(ref_path.with_suffix(".json").read_text())
     load_start = load()
     print(f"{name} {width}x{height}: load average {load_start}", flush=True)
@@ -176,6 +192,9 @@ def run_scene(name: str, times: list[float], variant: str, batch_spp: int = BATC
                 "mitsuba_batch_s": float(np.median(info["batch_seconds"])),
                 "mitsuba_tail_s": info["tail"], "mitsuba_nonfinite": info["nonfinite_dropped"],
             })  # fmt: skip
+            if own is not None:  # the same three errors against the scene's own reference
+                rows[-1].update(dpm_rmse_own=rmse(ours, own), mitsuba_plain_rmse_own=rmse(
+                    plain, own), mitsuba_oidn_rmse_own=rmse(oidn, own))  # fmt: skip
             images.append((ours, plain if plain_rmse <= oidn_rmse else oidn))
             reserve = info["tail"]
             shown = ("dpm_s", "passes", "dpm_rmse", "mitsuba_s", "mitsuba_spp",
@@ -189,7 +208,8 @@ def run_scene(name: str, times: list[float], variant: str, batch_spp: int = BATC
     iio.imwrite(OUT / f"{name}.png", linear_to_srgb8(strip))
     return {
         "scene": name, "control": name in CONTROLS, "size": f"{width}x{height}",
-        "reference": ref_path.name, "reference_noise_rgb": noise["noise_rgb"],
+        "reference": ref_path.name, "own_reference": None if own_path is None else own_path.name,
+        "reference_noise_rgb": noise["noise_rgb"],
         "reference_noise_luminance": noise["noise_luminance"],
         "reference_spp_per_half": noise["spp_per_half"], "variant": variant,
         "batch_spp": batch_spp, "picture_budget": times[pick], "load_start": load_start,
@@ -244,6 +264,35 @@ def summary(records: list[dict], peer: str = "Mitsuba") -> str:
             f"{int((ratios > 1.0).sum())} of {len(rows)} rows above 1.0.")  # fmt: skip
 
 
+def scaled_copies(records: list[dict]) -> list[str]:
+    """Lines on the scaled copies scored against their scale-1 twin's reference: the ratios
+    against their own reference beside the headline's."""
+    copies = [r for r in records if r.get("own_reference")]
+    if not copies:
+        return []
+    lines = [
+        "A uniformly scaled copy (every length times 0.01 or 100, radiance kept) has the image",
+        "of its scale-1 twin, so it is scored against the twin's reference: a reference rendered",
+        "at scale 0.01 shares its renderer's float error there (Mitsuba's own reference of",
+        "spheres_s0p01 moves the spheres' focal caustics). Against each copy's own Mitsuba",
+        "reference instead (rendered with the twin's seeds, so the two differ by little more",
+        "than the renderer's error at that scale):",
+    ]
+    for r in copies:
+        apart = rmse(
+            read_exr(REFERENCES / r["own_reference"]), read_exr(REFERENCES / r["reference"])
+        )
+        ratios = [
+            x["dpm_rmse_own"] / min(x["mitsuba_plain_rmse_own"], x["mitsuba_oidn_rmse_own"])
+            for x in r["rows"]
+        ]
+        budgets = ", ".join(f"{x['budget']:g}" for x in r["rows"])
+        lines.append(f"- {r['scene']} against {r['own_reference']} (RMSE {apart:.4f} from the "
+                     f"twin's) at {budgets} s: dpm / Mitsuba best "
+                     f"{', '.join(f'{q:.2f}' for q in ratios)}")  # fmt: skip
+    return [*lines, ""]
+
+
 def report(records: list[dict]) -> str:
     """The Markdown report: a table per group (caustic scenes, controls) and their summaries."""
     order = {name: i for i, name in enumerate(UNSEEN)}
@@ -287,7 +336,8 @@ def report(records: list[dict]) -> str:
         "Made by `python benchmarks/equal_time_unseen.py` (see its docstring): whole-process",
         "wall time from launch to exit, both warm; Mitsuba time-boxed to dpm's measured wall",
         f"time, in batches of {batches} spp; RMSE against the scene's Mitsuba 3 reference",
-        "(2 x 4096 spp); Mitsuba's score is the better of its plain mean and its OIDN image.",
+        "(two halves, spp per scene below; a scaled copy against its scale-1 twin's, see the",
+        "end); Mitsuba's score is the better of its plain mean and its OIDN image.",
         f"Machine: {'; '.join(machines)}; Mitsuba {', '.join(variants)}; {', '.join(dates)}.",
         "Load averages (1, 5, 15 min) per scene below.",
         "",
@@ -318,6 +368,7 @@ def report(records: list[dict]) -> str:
         "each MSE, though noisy where the reference's error is heavy-tailed (fireflies).",
         *per_scene,
         "",
+        *scaled_copies(records),
         *[f"![{r['scene']}: dpm, Mitsuba 3 best, reference at {r['picture_budget']:g} s]"
           f"(equal_time_unseen/{r['scene']}.png)" for r in records],
     ]  # fmt: skip

@@ -463,6 +463,16 @@ SPECS: dict[str, tuple[Callable[[], Scene], float, str]] = {
     "control_huge": (control_huge, 100.0, "diffuse-only control at scale 100, 128x80"),
 }
 UNSEEN: dict[str, str] = {name: spec[2] for name, spec in SPECS.items()}
+
+
+def unit_scale(name: str) -> str:
+    """The scene at scale 1 of which scene `name` is a uniformly scaled copy (the same
+    builder; the lights' radiance kept, so its image is the same), else `name` itself."""
+    builder, scale, _ = SPECS[name]
+    twins = [n for n, (b, s, _) in SPECS.items() if b is builder and s == 1.0]
+    return twins[0] if scale != 1.0 and twins else name
+
+
 CONTROLS: tuple[str, ...] = ("control_room", "control_huge")
 BACKGROUND = {"light", "floor", "back_wall", "far_wall", "ceiling", "left", "right"}
 

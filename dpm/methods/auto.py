@@ -21,9 +21,13 @@ add no caustic light to the image; otherwise photon paths per pass in proportion
 pixels. The caustic estimator is SPPM, never the network: at equal time the network's cost
 is not repaid (benchmarks/results/dpm.md). SPPM runs at two radii per pixel, and a pixel takes
 the narrower one's estimate where the wider one's blur shows beyond its noise (a sharp
-caustic's peak), else the wider one's: `sharper_where_biased`. The path-traced image is
-denoised with its albedo and normal guides and the caustic image is added after, so the
-denoiser neither smears caustics nor paints blotches where they meet glass or shadow.
+caustic's peak), else the wider one's: `sharper_where_biased`. The caustic image goes through
+the denoiser (albedo and normal guides) with the path-traced one, and `restore_certain` undoes
+the denoiser wherever it moved a pixel by more than the pixel's standard error (its paths',
+its light seen's and its caustic's, the last from its photon count): after a few passes the
+denoiser smooths the caustics' photon noise, while a caustic known well keeps its own sharp
+estimate (the denoiser would smear it, or paint blotches where it meets glass or shadow). As
+passes add photons and paths every pixel's error shrinks, so the render stays consistent.
 In scenes with mirrors or glass, the light the camera sees along its specular chains (a
 small light's images in them, specks that may cover a hundredth of a pixel) is estimated
 apart from the paths, from EMISSION_SAMPLES more camera samples per pass in each pixel that
@@ -460,34 +464,43 @@ class Passes:
         return now + last + self.finish_seconds > self.deadline
 
     def finish(self) -> np.ndarray:
-        """(H, W, 3) float32: SPPM's caustics at the sharper of two radii where it shows
-        (`sharper_where_biased`), added to the path-traced image after denoising it (the
-        light seen that is known well enough added after the denoiser too)."""
+        """(H, W, 3) float32: the path-traced image plus SPPM's caustics (`caustics`),
+        denoised where the pixel's standard error allows (`restore_certain`), plus the light
+        seen that is known well enough (added after the denoiser)."""
         self.bar.close()
         m, j, h, w = self.method, self.j, self.h, self.w
         m.passes, m.plan, m.caustic_photons = j, self.plan, self.state.photons
         m.dropped, m.extra_paths = self.dropped, self.extra_paths
         m.light_pixels = 0 if self.glassy is None else len(self.glassy)
         m.light_samples = int(sum(self.glow.half(k).count.sum() for k in (0, 1))) - j * self.pixels
-        caustic, sharp = sharper_where_biased(self.state, self.narrow, LEPSKI_Z)  # throughput·ρ/π
-        m.sharp_pixels = int(sharp.sum())
-        if self.footprint is not None:  # caustics were estimated
-            count = np.where(sharp, self.narrow.count, self.state.count)
-            radius = np.where(sharp, self.narrow.radius, self.state.radius)
-            # each photon falls in the discs of about π (radius in pixel widths)² pixels
-            overlap = np.pi * (radius / self.footprint) ** 2
-            caustic = spread_sparse(caustic, count, overlap, h, w)
-        caustic = caustic.astype(np.float32)
+        caustic, caustic_error = self.caustics()
         if not self.full:
-            return caustic.reshape(h, w, 3)
+            return caustic.astype(np.float32).reshape(h, w, 3)
         seen, error = self.glow.mean(), self.glow.standard_error()
         # known well enough as it is (not where one sample per half tells no error: inf)
         after = (error < SEEN_ERROR * luminance(seen))[:, None]
-        image = (self.paths.mean() + np.where(after, 0, seen)).astype(np.float32).reshape(h, w, 3)
+        image = self.paths.mean() + np.where(after, 0, seen) + caustic
+        image = image.astype(np.float32).reshape(h, w, 3)
         if m.denoises(self.o):
             with self.watch("denoise"):
                 guide = (self.albedo / j).reshape(h, w, 3), (self.normal / j).reshape(h, w, 3)
-                total = np.hypot(self.paths.standard_error(), np.where(after[:, 0], 0, error))
+                unseen = np.where(after[:, 0], 0, error)  # the light seen's, where denoised
+                total = np.sqrt(self.paths.standard_error() ** 2 + unseen**2 + caustic_error**2)
                 image = restore_certain(image, denoise(image, *guide), total.reshape(h, w))
-        image += np.where(after, seen, 0).astype(np.float32).reshape(h, w, 3)
-        return image + caustic.reshape(h, w, 3)
+        return image + np.where(after, seen, 0).astype(np.float32).reshape(h, w, 3)
+
+    def caustics(self) -> tuple[np.ndarray, np.ndarray]:
+        """(P, 3) float64 caustic radiance per pixel, SPPM's at the sharper of two radii where
+        it shows (`sharper_where_biased`) with sparse pixels spread (`spread_sparse`), and
+        (P,) its standard error (luminance): 1/√(photons in the pixel's disc) of it, as a
+        count of photons tells (zero where no caustic was estimated)."""
+        caustic, sharp = sharper_where_biased(self.state, self.narrow, LEPSKI_Z)  # throughput·ρ/π
+        self.method.sharp_pixels = int(sharp.sum())
+        if self.footprint is None:  # no caustics were estimated
+            return caustic, np.zeros(self.pixels)
+        count = np.where(sharp, self.narrow.count, self.state.count)
+        radius = np.where(sharp, self.narrow.radius, self.state.radius)
+        # each photon falls in the discs of about π (radius in pixel widths)² pixels
+        overlap = np.pi * (radius / self.footprint) ** 2
+        caustic = spread_sparse(caustic, count, overlap, self.h, self.w)
+        return caustic, luminance(caustic) / np.sqrt(np.maximum(count, 1.0))
