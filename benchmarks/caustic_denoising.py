@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent / "scenes"))
+from equal_time_unseen import scoring_reference  # noqa: E402
 from make_unseen import CONTROLS, UNSEEN, unseen_scenes  # noqa: E402
 
 from common import RESULTS, SCENES, cpu, markdown_table  # noqa: E402
@@ -65,8 +66,6 @@ def scenes(which: str) -> list[tuple[str, Path, Path]]:
     if which == "examples":
         refs = RESULTS / "equal_time"
         return [(n, SCENES / f"{n}.obj", next(refs.glob(f"{n}-*-reference.exr"))) for n in EXAMPLES]
-    from equal_time_unseen import scoring_reference
-
     paths = {p.stem: p for p in unseen_scenes()}
     out = []
     for name in UNSEEN:

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 from equal_time import dpm_run
-from equal_time_unseen import corrected_ratio, corrected_summary, load, reference_file, summary
+from equal_time_unseen import corrected_ratio, corrected_summary, load, scoring_reference, summary
 
 sys.path.insert(0, str(Path(__file__).parent / "scenes"))
 from make_unseen import CONTROLS, UNSEEN, unseen_scenes  # noqa: E402
@@ -79,7 +79,7 @@ def run_scene(name: str, times: list[float]) -> dict:
     """dpm and LuxCore at each budget on scene `name`; errors, seconds, spp and load."""
     path = {p.stem: p for p in unseen_scenes()}[name]
     scene = load_scene(path)
-    width, height, ref_path = reference_file(name, scene.camera.width)
+    width, height, ref_path, _ = scoring_reference(name, scene.camera.width)
     ref = read_exr(ref_path)
     load_start = load()
     print(f"{name} {width}x{height}: load average {load_start}", flush=True)
