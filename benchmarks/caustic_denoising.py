@@ -34,12 +34,12 @@ from make_unseen import CONTROLS, UNSEEN, unseen_scenes  # noqa: E402
 
 from common import RESULTS, SCENES, cpu, markdown_table  # noqa: E402
 from dpm import load_scene  # noqa: E402
-from dpm.density.base import luminance  # noqa: E402
 from dpm.io import read_exr  # noqa: E402
 from dpm.methods import auto  # noqa: E402
 from dpm.metrics import rmse  # noqa: E402
 from dpm.options import RenderOptions  # noqa: E402
 from dpm.renderer import render  # noqa: E402
+from dpm.scene import Scene  # noqa: E402
 
 OUT = RESULTS / "caustic_denoising"
 TABLE = RESULTS / "caustic_denoising.md"
@@ -49,30 +49,28 @@ EXAMPLES = ("dragon", "glass_egg", "pool1", "pool2", "red_wine", "ring", "torus"
 def added_after(passes: auto.Passes) -> np.ndarray:
     """(H, W, 3) float32: the render's image with the caustics added after the denoiser,
     which sees the path-traced part alone (the light seen known well added after too)."""
-    h, w, j = passes.h, passes.w, passes.j
+    h, w = passes.h, passes.w
     caustic, _ = passes.caustics()
-    seen, error = passes.glow.mean(), passes.glow.standard_error()
-    after = (error < auto.SEEN_ERROR * luminance(seen))[:, None]
+    seen, error, after = passes.light_seen()
     image = (passes.paths.mean() + np.where(after, 0, seen)).astype(np.float32).reshape(h, w, 3)
-    guide = (passes.albedo / j).reshape(h, w, 3), (passes.normal / j).reshape(h, w, 3)
     total = np.hypot(passes.paths.standard_error(), np.where(after[:, 0], 0, error))
-    image = auto.restore_certain(image, auto.denoise(image, *guide), total.reshape(h, w))
+    image = auto.restore_certain(image, auto.denoise(image, *passes.guides()), total.reshape(h, w))
     image += np.where(after, seen, 0).astype(np.float32).reshape(h, w, 3)
     return image + caustic.astype(np.float32).reshape(h, w, 3)
 
 
-def scenes(which: str) -> list[tuple[str, Path, Path]]:
-    """(name, scene OBJ, reference EXR) of the set."""
+def scenes(which: str) -> list[tuple[str, Scene, Path]]:
+    """(name, scene, reference EXR) of the set."""
     if which == "examples":
         refs = RESULTS / "equal_time"
-        return [(n, SCENES / f"{n}.obj", next(refs.glob(f"{n}-*-reference.exr"))) for n in EXAMPLES]
+        return [(n, load_scene(SCENES / f"{n}.obj"), next(refs.glob(f"{n}-*-reference.exr")))
+                for n in EXAMPLES]  # fmt: skip
     paths = {p.stem: p for p in unseen_scenes()}
     out = []
     for name in UNSEEN:
-        if name in CONTROLS:
-            continue
-        *_, ref, _ = scoring_reference(name, load_scene(paths[name]).camera.width)
-        out.append((name, paths[name], ref))
+        if name not in CONTROLS:
+            scene = load_scene(paths[name])
+            out.append((name, scene, scoring_reference(name, scene.camera.width)[2]))
     return out
 
 
@@ -88,10 +86,9 @@ def run(which: str, pass_counts: list[int], seeds: list[int]) -> dict:
     auto.Passes.finish = both
     rows = []
     try:
-        for name, path, ref_path in scenes(which):
+        for name, scene, ref_path in scenes(which):
             ref = read_exr(ref_path)
             h, w = ref.shape[:2]
-            scene = load_scene(path)
             for p in pass_counts:
                 through, after = [], []
                 for seed in seeds:

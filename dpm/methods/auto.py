@@ -476,18 +476,27 @@ class Passes:
         caustic, caustic_error = self.caustics()
         if not self.full:
             return caustic.astype(np.float32).reshape(h, w, 3)
-        seen, error = self.glow.mean(), self.glow.standard_error()
-        # known well enough as it is (not where one sample per half tells no error: inf)
-        after = (error < SEEN_ERROR * luminance(seen))[:, None]
+        seen, error, after = self.light_seen()
         image = self.paths.mean() + np.where(after, 0, seen) + caustic
         image = image.astype(np.float32).reshape(h, w, 3)
         if m.denoises(self.o):
             with self.watch("denoise"):
-                guide = (self.albedo / j).reshape(h, w, 3), (self.normal / j).reshape(h, w, 3)
                 unseen = np.where(after[:, 0], 0, error)  # the light seen's, where denoised
                 total = np.sqrt(self.paths.standard_error() ** 2 + unseen**2 + caustic_error**2)
-                image = restore_certain(image, denoise(image, *guide), total.reshape(h, w))
+                image = restore_certain(image, denoise(image, *self.guides()), total.reshape(h, w))
         return image + np.where(after, seen, 0).astype(np.float32).reshape(h, w, 3)
+
+    def light_seen(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(P, 3) float64 light seen along the camera's specular chains per pixel, (P,) its
+        standard error (luminance) and (P, 1) bool where it is known well enough to skip the
+        denoiser (not where one sample per half tells no error: inf)."""
+        seen, error = self.glow.mean(), self.glow.standard_error()
+        return seen, error, (error < SEEN_ERROR * luminance(seen))[:, None]
+
+    def guides(self) -> tuple[np.ndarray, np.ndarray]:
+        """The denoiser's (H, W, 3) albedo and normal guides: the passes' means."""
+        shape = (self.h, self.w, 3)
+        return (self.albedo / self.j).reshape(shape), (self.normal / self.j).reshape(shape)
 
     def caustics(self) -> tuple[np.ndarray, np.ndarray]:
         """(P, 3) float64 caustic radiance per pixel, SPPM's at the sharper of two radii where
