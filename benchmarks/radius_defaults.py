@@ -147,11 +147,14 @@ def run_unseen(
         row["default"] = defaults(points, photons, reference, n)
         rows[n] = row
         print(name, n, row["default"], flush=True)
-        if not tune and "best" in row:
+        if not tune:  # a row never tuned stays so (the table shows it as missing)
             continue
-        row["best"], row["trials"] = {}, []
+        row.setdefault("best", {})
+        row.setdefault("trials", [])
         grid = width * np.geomspace(0.15, 6.0, 10)
-        for m in TUNED:  # the record is saved after each method: a long run keeps its part
+        for m in TUNED:  # saved after each method: a long run keeps its part, a rerun resumes
+            if m in row["best"]:
+                continue
             trials = tune_widening(points, photons, reference, grid, methods=(m,))
             row["best"][m] = asdict(best(trials, m))
             row["trials"] += [asdict(t) for t in trials]
@@ -237,7 +240,8 @@ def markdown() -> str:
                 rows.append([r["scene"], f"{row['paths']:,}", f"{row['caustic_photons']:,}",
                              f"{r['noise']:.4f}", *cells])  # fmt: skip
         summary = ratios(records)
-        lines += ["", f"## {set_} ({records[0]['machine']})", "", *markdown_table(head, rows), ""]
+        machines = "; ".join(sorted({r["machine"] for r in records}))  # RMSE: any machine will do
+        lines += ["", f"## {set_} ({machines})", "", *markdown_table(head, rows), ""]
         for m, values in summary.items():
             worst = max(values, default=float("nan"))
             lines.append(f"- {m}: geometric mean {geomean(values):.2f}, worst {worst:.2f}"
