@@ -25,7 +25,8 @@ from dpm.options import COMPONENTS, cli_fields, default_text, flag
 if TYPE_CHECKING:
     from dpm.options import RenderOptions
 
-FIRST_RUN = "about a minute and a half on 2 cores"  # 83 s, Quick start: benchmarks/cold_start.py
+# the README's first render on 2 idle cores: 83 s (Intel Xeon), 155 s (AMD Zen 4); cold_start.py
+FIRST_RUN = "one and a half to three minutes on 2 cores"
 
 
 class _Parser(argparse.ArgumentParser):
