@@ -201,6 +201,22 @@ def test_a_caustic_read_low_by_chance_is_not_taken_for_certain(glass, monkeypatc
         assert restored.mean() == 1.0 if most else restored.mean() < 0.9, (spp, restored.mean())
 
 
+def test_a_pixel_with_no_caustic_is_judged_by_its_paths(glass, monkeypatch) -> None:
+    # Lit pixels the caustic does not reach: their caustic neither knows nor hides anything,
+    # so after many passes the denoiser's quadrupling is undone wherever the paths' own error
+    # rules it out (a caustic error scaled by what the denoiser leaves would excuse it).
+    monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal: color * 4.0)
+    kw = {"spp": 48, "seed": 1}
+    full = render(glass, options(**kw)).image
+    plain = render(glass, options(**kw, denoise=False)).image
+    caustic = render(glass, options(**kw, component="caustic")).image
+    light = luminance(plain)
+    dark = (luminance(caustic) < 0.01 * light) & (light > 0.05 * light.max())
+    assert dark.sum() > 50
+    restored = np.isclose(full[dark], plain[dark], rtol=1e-4, atol=0).all(axis=1)
+    assert restored.mean() > 0.5, restored.mean()
+
+
 def test_light_seen_in_glass_that_every_sample_finds_skips_the_denoiser(
     tmp_path: Path, monkeypatch
 ) -> None:

@@ -24,8 +24,8 @@ the narrower one's estimate where the wider one's blur shows beyond its noise (a
 caustic's peak), else the wider one's: `sharper_where_biased`. The caustic image goes through
 the denoiser (albedo and normal guides) with the path-traced one, and `restore_certain` undoes
 the denoiser wherever it moved a pixel by more than the pixel's standard error (its paths',
-its light seen's and its caustic's, the last from its photon count, of the larger of its own
-value and the denoiser's): after a few passes the
+its light seen's and its caustic's, the last 1/√(its photon count) of the larger of its own
+value and what the denoiser leaves its caustic): after a few passes the
 denoiser smooths the caustics' photon noise, while a caustic known well keeps its own sharp
 estimate (the denoiser would smear it, or paint blotches where it meets glass or shadow). As
 passes add photons and paths every pixel's error shrinks, so the render stays consistent.
@@ -474,7 +474,7 @@ class Passes:
         m.dropped, m.extra_paths = self.dropped, self.extra_paths
         m.light_pixels = 0 if self.glassy is None else len(self.glassy)
         m.light_samples = int(sum(self.glow.half(k).count.sum() for k in (0, 1))) - j * self.pixels
-        caustic, relative = self.caustics()
+        caustic, count = self.caustics()
         if not self.full:
             return caustic.astype(np.float32).reshape(h, w, 3)
         seen, error, after = self.light_seen()
@@ -483,15 +483,18 @@ class Passes:
         if m.denoises(self.o):
             with self.watch("denoise"):
                 denoised = denoise(image, *self.guides())
-                # A caustic read low by chance (2 photons where 10 were due) is certain by
-                # its own value: scale its relative error by the larger of it and what the
-                # denoiser leaves it (the denoised pixel less everything else).
-                rest = luminance(image.reshape(-1, 3)) - luminance(caustic)
-                share = np.maximum(luminance(denoised.reshape(-1, 3)) - rest, luminance(caustic))
+                # A caustic's relative error is 1/√(photons in its disc), but of which value?
+                # Of its own, a caustic read low by chance (2 photons where 10 were due) looks
+                # certain and stays dark: take the larger of it and what the denoiser leaves
+                # it (the denoised pixel less everything else). A pixel without photons keeps
+                # its own (zero: no caustic), so its paths' error alone decides there.
+                own = luminance(caustic)
+                rest = luminance(image.reshape(-1, 3)) - own
+                left = np.maximum(luminance(denoised.reshape(-1, 3)) - rest, own)
+                share = np.where(count > 0, left, own)
+                caustic_error = share / np.sqrt(np.maximum(count, 1.0))
                 unseen = np.where(after[:, 0], 0, error)  # the light seen's, where denoised
-                total = np.sqrt(
-                    self.paths.standard_error() ** 2 + unseen**2 + (relative * share) ** 2
-                )
+                total = np.sqrt(self.paths.standard_error() ** 2 + unseen**2 + caustic_error**2)
                 image = restore_certain(image, denoised, total.reshape(h, w))
         return image + np.where(after, seen, 0).astype(np.float32).reshape(h, w, 3)
 
@@ -510,8 +513,8 @@ class Passes:
     def caustics(self) -> tuple[np.ndarray, np.ndarray]:
         """(P, 3) float64 caustic radiance per pixel, SPPM's at the sharper of two radii where
         it shows (`sharper_where_biased`) with sparse pixels spread (`spread_sparse`), and
-        (P,) its relative standard error: 1/√(photons in the pixel's disc), as a count of
-        photons tells (zero where no caustic was estimated)."""
+        (P,) the photons in the pixel's disc that tell its error (zero where no caustic
+        was estimated)."""
         caustic, sharp = sharper_where_biased(self.state, self.narrow, LEPSKI_Z)  # throughput·ρ/π
         self.method.sharp_pixels = int(sharp.sum())
         if self.footprint is None:  # no caustics were estimated
@@ -521,4 +524,4 @@ class Passes:
         # each photon falls in the discs of about π (radius in pixel widths)² pixels
         overlap = np.pi * (radius / self.footprint) ** 2
         caustic = spread_sparse(caustic, count, overlap, self.h, self.w)
-        return caustic, 1 / np.sqrt(np.maximum(count, 1.0))
+        return caustic, count
