@@ -160,6 +160,14 @@ def test_the_default_render_never_loads_the_network(tmp_path: Path) -> None:
     subprocess.run([sys.executable, "-c", code], check=True)
 
 
+def three_renders(scene, **kw) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The (H, W, 3) images of one auto render: denoised, not denoised, caustics alone."""
+    full = render(scene, options(**kw)).image
+    plain = render(scene, options(**kw, denoise=False)).image
+    caustic = render(scene, options(**kw, component="caustic")).image
+    return full, plain, caustic
+
+
 def test_noisy_caustics_go_through_the_denoiser_and_known_ones_keep_their_estimate(
     glass, monkeypatch
 ) -> None:
@@ -168,9 +176,7 @@ def test_noisy_caustics_go_through_the_denoiser_and_known_ones_keep_their_estima
     # caustic pixel known to within a few percent moved by half is given back its own value.
     monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal: color * 0.5)
     for spp, kept in ((2, True), (48, False)):
-        full = render(glass, options(spp=spp, seed=1)).image
-        plain = render(glass, options(spp=spp, seed=1, denoise=False)).image
-        caustic = render(glass, options(spp=spp, seed=1, component="caustic")).image
+        full, plain, caustic = three_renders(glass, spp=spp, seed=1)
         light = luminance(caustic)
         bright = (light > 0.5 * luminance(plain)) & (light > 0.2 * light.max())  # the caustic
         assert bright.sum() > 10
@@ -190,10 +196,7 @@ def test_a_caustic_read_low_by_chance_is_not_taken_for_certain(glass, monkeypatc
     # the caustic, a few photons do not overrule it; with many, the pixel is given back.
     monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal: color * 4.0)
     for spp, photons, most in ((4, 2_000, False), (48, 200_000, True)):
-        kw = {"spp": spp, "seed": 1, "photons": photons}
-        full = render(glass, options(**kw)).image
-        plain = render(glass, options(**kw, denoise=False)).image
-        caustic = render(glass, options(**kw, component="caustic")).image
+        full, plain, caustic = three_renders(glass, spp=spp, seed=1, photons=photons)
         light = luminance(caustic)
         bright = (light > 0.5 * luminance(plain)) & (light > 0.2 * light.max())  # the caustic
         assert bright.sum() > 10
@@ -206,10 +209,7 @@ def test_a_pixel_with_no_caustic_is_judged_by_its_paths(glass, monkeypatch) -> N
     # so after many passes the denoiser's quadrupling is undone wherever the paths' own error
     # rules it out (a caustic error scaled by what the denoiser leaves would excuse it).
     monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal: color * 4.0)
-    kw = {"spp": 48, "seed": 1}
-    full = render(glass, options(**kw)).image
-    plain = render(glass, options(**kw, denoise=False)).image
-    caustic = render(glass, options(**kw, component="caustic")).image
+    full, plain, caustic = three_renders(glass, spp=48, seed=1)
     light = luminance(plain)
     dark = (luminance(caustic) < 0.01 * light) & (light > 0.05 * light.max())
     assert dark.sum() > 50

@@ -485,13 +485,11 @@ class Passes:
                 denoised = denoise(image, *self.guides())
                 # A caustic's relative error is 1/√(photons in its disc), but of which value?
                 # Of its own, a caustic read low by chance (2 photons where 10 were due) looks
-                # certain and stays dark: take the larger of it and what the denoiser leaves
-                # it (the denoised pixel less everything else). A pixel without photons keeps
-                # its own (zero: no caustic), so its paths' error alone decides there.
-                own = luminance(caustic)
-                rest = luminance(image.reshape(-1, 3)) - own
-                left = np.maximum(luminance(denoised.reshape(-1, 3)) - rest, own)
-                share = np.where(count > 0, left, own)
+                # certain and stays dark: where the disc holds photons, take what the
+                # denoiser leaves it (its own plus the denoiser's rise, if any). A pixel
+                # without photons keeps its own (zero), so its paths' error decides there.
+                rise = luminance(denoised.reshape(-1, 3)) - luminance(image.reshape(-1, 3))
+                share = luminance(caustic) + np.where(count > 0, np.maximum(rise, 0.0), 0.0)
                 caustic_error = share / np.sqrt(np.maximum(count, 1.0))
                 unseen = np.where(after[:, 0], 0, error)  # the light seen's, where denoised
                 total = np.sqrt(self.paths.standard_error() ** 2 + unseen**2 + caustic_error**2)
