@@ -112,13 +112,16 @@ def mitsuba_run(desc: Path, spp: int, seed: int) -> tuple[np.ndarray, float]:
     return np.load(out), seconds
 
 
-def dpm_run(scene: Path, width: int, height: int, budget: float, seed: int, folder: Path):
-    """(image, whole-process seconds, stats) of `dpm-render SCENE --time budget`."""
+def dpm_run(
+    scene: Path, width: int, height: int, budget: float, seed: int, folder: Path,
+    extra: tuple[str, ...] = (),
+):  # fmt: skip
+    """(image, whole-process seconds, stats) of `dpm-render SCENE --time budget [extra]`."""
     out, stats = folder / "dpm.exr", folder / "dpm.json"
     command = [
         "dpm-render", str(scene), "--time", str(budget), "--width", str(width),
         "--height", str(height), "--seed", str(seed), "-o", str(out), "--stats", str(stats),
-        "--quiet",
+        "--quiet", *extra,
     ]  # fmt: skip
     seconds = wall(command)
     return read_exr(out), seconds, json.loads(stats.read_text())

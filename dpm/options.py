@@ -75,6 +75,10 @@ class RenderOptions:
         None, "estimate caustics at the first N samples per pixel only", scoped=True,
         default_text="every sample; hybrid: 1", metavar="N",
     )  # fmt: skip
+    network: bool | None = _option(
+        None, "auto's learned caustic filter (dpm/nn/caustic_net.py)", scoped=True,
+        default_text="on where the plan keeps caustics and the network's cost fits the budget",
+    )  # fmt: skip
     denoise: bool | None = _option(
         None, "Open Image Denoise with albedo and normal guides",
         default_text="on for auto and hybrid",

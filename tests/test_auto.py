@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import subprocess
 import sys
@@ -148,16 +149,19 @@ def test_a_scene_without_mirror_or_glass_traces_no_photons(diffuse) -> None:
     assert result.stats["caustic_photons"] == 0
 
 
-def test_the_default_render_never_loads_the_network(tmp_path: Path) -> None:
-    # auto never runs the network: JAX (the network's only user) is not even imported.
+def test_the_default_render_never_imports_jax(tmp_path: Path) -> None:
+    # auto's caustic filter runs in Numba (dpm.nn.caustic_fused): importing JAX would cost a
+    # short render most of its budget.
     path = write_scene(tmp_path, GLASS_OBJ, GLASS_MTL, CAMERA)
+    stats = tmp_path / "stats.json"
     code = (
         "import sys; from dpm.cli import render_main; "
         f"assert render_main([{str(path)!r}, '--spp', '2', '-o', {str(tmp_path / 'o.exr')!r},"
-        " '--quiet']) == 0; "
+        f" '--quiet', '--stats', {str(stats)!r}]) == 0; "
         "assert 'jax' not in sys.modules, 'the default render imported JAX'"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
+    assert json.loads(stats.read_text())["plan"]["network"]  # and it did run the filter
 
 
 def three_renders(scene, **kw) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -422,6 +422,14 @@ def test_weight_files_round_trip(tmp_path: Path) -> None:
         ('[data]\nout = "d"\n[train]\nbalance = 1\n', "balance must be true or false"),
         ('[data]\nout = "d"\nworkers = -1\n', "workers must be 0 (one per core)"),
         ('[data]\nout = "d"\nray_address = 6379\n', "ray_address must be a string"),
+        ('[data]\nout = "d"\nkind = "images"\n', "kind must be 'points' or 'caustic'"),
+        ('[data]\nout = "d"\nkind = "caustic"\n', "the caustic architecture trains on"),
+        ('[data]\nout = "d"\n[model]\narchitecture = "caustic"\n', "the caustic architecture"),
+        (
+            '[data]\nout = "d"\nkind = "caustic"\npasses = [1, 300]\n[model]\n'
+            'architecture = "caustic"\n',
+            "below target_passes",
+        ),
     ],
 )
 def test_bad_configs_are_one_line(
@@ -515,3 +523,27 @@ def test_relmse_and_mse_teach_the_mean_of_noisy_targets_and_mu_law_does_not() ->
     assert abs(grad("relmse")) < 1e-3 * abs(grad("mu-law"))
     assert abs(grad("mse")) < 1e-3 * abs(grad("mu-law"))
     assert grad("mu-law") > 0  # descending it lowers the estimate below the mean
+
+
+def test_a_caustic_filter_trains_and_the_render_reads_its_weights(tmp_path: Path) -> None:
+    from dpm.nn.caustic_fused import load_filter
+
+    text = (ROOT / "configs" / "caustic.toml").read_text()
+    for old, new in (('"runs/caustic-data"', f'"{tmp_path / "data"}"'),
+                     ('"runs/caustic"', f'"{tmp_path / "run"}"'), ("scenes = 160", "scenes = 3"),
+                     ("width = 64", "width = 16"),
+                     ("passes = [1, 2, 4, 8, 16, 32, 64, 128]", "passes = [1, 3]"),
+                     ("target_passes = 512", "target_passes = 8"), ("steps = 3000", "steps = 3"),
+                     ("batch = 16 ", "batch = 2 "), ("scenes_per_batch = 16", "scenes_per_batch = 2"),
+                     ("validation_scenes = 12", "validation_scenes = 1"),
+                     ("validation_points = 96", "validation_points = 2"),
+                     ("workers = 0", "workers = 1")):  # fmt: skip
+        assert old in text, old
+        text = text.replace(old, new)
+    config = tmp_path / "caustic.toml"
+    config.write_text(text)
+    assert train_main(["--config", str(config), "--quiet"]) == 0
+    weights = load_filter(tmp_path / "run" / "model.msgpack")
+    assert weights.out_kernel.shape == (24, 101)
+    rows = (tmp_path / "run" / "metrics.csv").read_text().splitlines()
+    assert len(rows) == 5 and all("nan" not in r for r in rows)  # header, steps 0-3

@@ -65,12 +65,26 @@ class DataConfig:
     seed: int = 0
     workers: int = 0  # scenes at once on a local Ray runtime; 0: one per core; 1: no Ray
     ray_address: str = ""  # a Ray cluster to make the scenes on instead (workers is ignored)
+    # "points" (DPM's and nppm's: points, photons, PPM truth) or "caustic" (auto's caustic
+    # filter: its statistics after each of `passes` passes, and a `target_passes` render;
+    # dpm.data.caustic_set)
+    kind: str = "points"
+    passes: tuple[int, ...] = (1, 2, 4, 8, 16, 32)
+    target_passes: int = 256
 
     def identity(self) -> dict:
         """What a set's content depends on (not where it lives or what makes it)."""
         d = asdict(self)
         for key in ("out", "scenes", "workers", "ray_address"):
             d.pop(key)
+        if self.kind == "points":  # what a points set never read (sets made before them)
+            for key in ("kind", "passes", "target_passes"):
+                d.pop(key)
+        else:
+            d["passes"] = list(self.passes)
+            for key in ("budgets", "reference_paths", "reference_radius",
+                        "reference_paths_per_pass"):  # fmt: skip
+                d.pop(key)
         d["budgets"] = list(self.budgets)
         d["generator"] = GENERATOR
         return d
@@ -193,11 +207,16 @@ def write_manifest(out: Path, manifest: dict) -> None:
 def build(
     config: DataConfig,
     progress: bool = True,
-    make: Callable[[DataConfig, int, int | None], tuple[dict, dict]] = make_shard,
+    make: Callable[[DataConfig, int, int | None], tuple[dict, dict]] | None = None,
 ) -> dict:
     """Make every missing shard of the set (resuming a killed build), as Ray tasks or, with
     `workers` = 1 and no `ray_address`, in this process; returns the manifest. `make` makes
-    one scene (tests put faults in it)."""
+    one scene (default: `make_shard`, or `caustic_set.make_caustic_shard` for a caustic
+    set; tests put faults in it)."""
+    if make is None:
+        from dpm.data.caustic_set import make_caustic_shard
+
+        make = make_caustic_shard if config.kind == "caustic" else make_shard
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
     manifest = read_manifest(out) or {"config": config.identity(), "shards": []}

@@ -56,6 +56,8 @@ from dpm.estimators.sppm import sppm_gather
 from dpm.filters import box_mean
 from dpm.methods.adaptive import ADAPT_AFTER, EXTRA_CAP, EXTRA_PER_PIXEL, Halves
 from dpm.methods.base import Method, check_photons
+from dpm.nn import caustic_fused
+from dpm.nn.caustic_stats import CausticStats
 from dpm.options import RenderOptions
 from dpm.scene import DIFFUSE, Scene
 from dpm.stopwatch import Stopwatch
@@ -98,6 +100,9 @@ SPARSE_PHOTONS, SPREAD_WINDOWS = 1.0 / SEEN_ERROR**2, (3, 5, 9, 17, 33)
 MIN_CAUSTIC_SHARE = 1e-3  # caustics under this share of the first pass's light are left out
 # Seconds kept for what follows the last pass (denoising, writing): a fixed part and per pixel.
 FINISH_SECONDS, FINISH_SECONDS_PER_PIXEL = 0.05, 3e-6
+# The learned caustic filter's seconds per pixel on 2 cores (measured), and the most of a
+# --time budget it may take: past it the plan leaves it out.
+NETWORK_SECONDS_PER_PIXEL, NETWORK_SHARE = 4e-6, 0.15
 
 
 @dataclass
@@ -107,11 +112,27 @@ class Plan:
     caustics: str  # "sppm" or "off"
     photons_per_pass: int  # emitted photon paths per pass after the first (0: none)
     reason: str  # one line for the summary and the stats JSON
+    network: bool = False  # the learned caustic filter on SPPM's statistics
 
     def as_dict(self) -> dict[str, Any]:
         """The plan for the stats JSON."""
         return {"caustics": self.caustics, "photons_per_pass": self.photons_per_pass,
-                "reason": self.reason}  # fmt: skip
+                "network": self.network, "reason": self.reason}  # fmt: skip
+
+
+def plan_network(plan: Plan, wanted: bool | None, pixels: int, budget: float | None) -> Plan:
+    """The plan with the learned caustic filter (`dpm.nn.caustic_fused`) where it keeps
+    caustics, unless --no-network, or the filter's predicted time is over NETWORK_SHARE of
+    the --time budget (and --network was not given)."""
+    if plan.caustics == "off" or wanted is False:
+        why = "" if plan.caustics == "off" else "; no network (--no-network)"
+        return Plan(plan.caustics, plan.photons_per_pass, plan.reason + why)
+    cost = NETWORK_SECONDS_PER_PIXEL * pixels
+    if wanted is None and budget is not None and cost > NETWORK_SHARE * budget:
+        return Plan(plan.caustics, plan.photons_per_pass, plan.reason + f"; no network (its "
+                    f"{cost:.2f} s would be over {NETWORK_SHARE:.0%} of the budget)")  # fmt: skip
+    return Plan(plan.caustics, plan.photons_per_pass, plan.reason + "; learned caustic filter",
+                network=True)  # fmt: skip
 
 
 def has_specular(scene: Scene) -> bool:
@@ -233,7 +254,7 @@ class Auto(Method):
 
     name = "auto"
     summary = "the default: passes of path samples + SPPM caustics, planned per scene, until --time"
-    options = frozenset({"time", "radius", "photons_per_pass"})
+    options = frozenset({"time", "radius", "photons_per_pass", "network", "weights"})
     denoise = True
     renders_image: ClassVar[bool] = True
 
@@ -310,6 +331,7 @@ class Passes:
         self.plan = None if has_specular(scene) else make_plan(scene, self.pixels, 1.0, 0.0, None)
         self.first_photons = self.given or max(1, round(PHOTONS_PER_PIXEL * self.pixels))
         self.dropped = 0
+        self.filter = None  # the learned caustic filter's weights, where the plan uses it
         # With mirrors or glass, the light seen along the camera's specular chains (the
         # lights' images in them: specks that may cover a hundredth of a pixel) is estimated
         # apart from the paths, from more camera samples where pixels see a mirror or glass:
@@ -401,9 +423,9 @@ class Passes:
                 with watch("emitted"):
                     self.see_light(points.emitted.astype(np.float64))
             self.dropped += bad
-            a, n = guides(points)
-            self.albedo += a
-            self.normal += n
+        a, n = guides(points)  # the denoiser's guides, and the caustic filter's
+        self.albedo += a
+        self.normal += n
         if photons is not None:
             sppm_gather((state, self.narrow), points, photons, watch)
 
@@ -446,9 +468,12 @@ class Passes:
         if self.full:
             path_light = float((self.paths.mean() + self.glow.mean()).mean(axis=1).sum())
         caustic_light = float(self.state.irradiance().mean(axis=1).sum())
-        self.plan = make_plan(
-            self.scene, self.pixels, path_light, caustic_light, self.given, self.why
-        )
+        plan = make_plan(self.scene, self.pixels, path_light, caustic_light, self.given, self.why)
+        self.plan = plan_network(plan, self.o.network, self.pixels, self.o.time)
+        if self.plan.network:
+            with self.watch("network"):
+                self.filter = caustic_fused.load_filter(self.o.weights or caustic_fused.SHIPPED)
+                caustic_fused.warm(self.filter)  # compiled (or loaded) now, not past a budget
 
     def done(self) -> bool:
         """Whether to stop: --spp passes done, or the next pass would overrun the budget (a
@@ -508,6 +533,18 @@ class Passes:
         shape = (self.h, self.w, 3)
         return (self.albedo / self.j).reshape(shape), (self.normal / self.j).reshape(shape)
 
+    def caustic_stats(self) -> CausticStats:
+        """The passes' per-pixel caustic statistics, as the learned filter reads them."""
+        s, n, fp = self.state, self.narrow, self.footprint
+        own, sharp = sharper_where_biased(s, n, LEPSKI_Z)
+        count = np.where(sharp, n.count, s.count)
+        overlap = np.pi * (np.where(sharp, n.radius, s.radius) / fp) ** 2
+        return CausticStats(
+            self.h, self.w, self.j, s.irradiance(), n.irradiance(), s.count, n.count, own,
+            count, spread_sparse(own, count, overlap, self.h, self.w), s.radius / fp,
+            np.log(fp / np.median(fp)), self.albedo / self.j, self.normal / self.j,
+        )  # fmt: skip
+
     def caustics(self) -> tuple[np.ndarray, np.ndarray]:
         """(P, 3) float64 caustic radiance per pixel, SPPM's at the sharper of two radii where
         it shows (`sharper_where_biased`) with sparse pixels spread (`spread_sparse`), and
@@ -518,6 +555,9 @@ class Passes:
         if self.footprint is None:  # no caustics were estimated
             return caustic, np.zeros(self.pixels)
         count = np.where(sharp, self.narrow.count, self.state.count)
+        if self.filter is not None:
+            with self.watch("network"):
+                return caustic_fused.filter_caustics(self.filter, self.caustic_stats()), count
         radius = np.where(sharp, self.narrow.radius, self.state.radius)
         # each photon falls in the discs of about π (radius in pixel widths)² pixels
         overlap = np.pi * (radius / self.footprint) ** 2

@@ -110,6 +110,13 @@ def load_config(path: str | Path) -> Config:
     if not 1 <= t.validation_scenes < d.scenes:
         raise InputError(f"{path}: [train] validation_scenes must be at least 1 and fewer "
                          f"than the {d.scenes} scenes of [data]")  # fmt: skip
+    if d.kind not in ("points", "caustic"):
+        raise InputError(f"{path}: [data] kind must be 'points' or 'caustic'")
+    if (d.kind == "caustic") != (m.architecture == "caustic"):
+        raise InputError(f"{path}: the caustic architecture trains on [data] kind = 'caustic', "
+                         "and only it does")  # fmt: skip
+    if not d.passes or min(d.passes) < 1 or d.target_passes <= max(d.passes):
+        raise InputError(f"{path}: [data] passes must be positive and below target_passes")
     if not d.budgets or min(d.budgets) < 1 or not t.learning_rate > 0:
         raise InputError(f"{path}: [data] budgets and [train] learning_rate must be positive")
     for key in ("reference_paths", "reference_paths_per_pass"):

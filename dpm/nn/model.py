@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 
 from dpm.density.shaped import FEATURES
+from dpm.nn.caustic_net import CausticNet, example_features
 from dpm.nn.features import CHANNELS, flux_unmap
 from dpm.nn.shape_net import ShapeNet
 
@@ -74,13 +75,14 @@ class DirectNet(nn.Module):
 
 ARCHITECTURES = {
     "dpm": (KernelNet, 1), "dpm-l": (KernelNet, 4), "direct": (DirectNet, 1),
-    "nppm": (ShapeNet, 1),
+    "nppm": (ShapeNet, 1), "caustic": (CausticNet, 1),
 }  # fmt: skip
 
 
 def make_model(architecture: str, width: int = 32) -> nn.Module:
-    """The network called 'dpm', 'dpm-l' (4× channels), 'direct' or 'nppm' (the shape network
-    of dpm.nn.shape_net), base width `width`."""
+    """The network called 'dpm', 'dpm-l' (4× channels), 'direct', 'nppm' (the shape network
+    of dpm.nn.shape_net) or 'caustic' (auto's caustic filter, dpm.nn.caustic_net), base
+    width `width`."""
     cls, factor = ARCHITECTURES[architecture]
     return cls(width=width * factor)
 
@@ -89,4 +91,6 @@ def example_input(architecture: str, k: int) -> tuple[jnp.ndarray, ...]:
     """Zero arguments of the right shapes for `init` of network `architecture` on K photons."""
     if architecture == "nppm":
         return (jnp.zeros(FEATURES, jnp.float32),)
+    if architecture == "caustic":
+        return (example_features(),)
     return jnp.zeros((k, CHANNELS), jnp.float32), jnp.ones(k, bool)

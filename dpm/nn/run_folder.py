@@ -86,7 +86,11 @@ class RunFolder:
         with atomic(stamp) as tmp:
             tmp.write_text(json.dumps(identity, indent=1))
         m, t = config.model, config.train
-        what = m.architecture if m.architecture == "nppm" else f"{m.architecture}, K = {m.k}"
+        what = (
+            m.architecture
+            if m.architecture in ("nppm", "caustic")
+            else f"{m.architecture}, K = {m.k}"
+        )
         self.title = f"{what}, {t.loss} loss"
         self.weights = self.out / "model.msgpack"
         self._ocp = ocp

@@ -26,6 +26,7 @@ import optax
 from tqdm import tqdm
 
 from dpm.data.dataset import build
+from dpm.nn.caustic_training import CausticSampler, caustic_estimates
 from dpm.nn.config import Config
 from dpm.nn.features import kernel_estimate
 from dpm.nn.infer import point_radiance
@@ -88,7 +89,8 @@ def train(config: Config, progress: bool = True) -> tuple[dict, list[dict]]:
     manifest = build(config.data, progress=progress)
     n = len(manifest["shards"])
     nppm = m.architecture == "nppm"  # the shape network: its own samples and loss
-    sampler_class = ShapeSampler if nppm else Sampler
+    caustic = m.architecture == "caustic"  # auto's caustic filter: whole images
+    sampler_class = ShapeSampler if nppm else CausticSampler if caustic else Sampler
     sampler = sampler_class(config, manifest, list(range(n - t.validation_scenes)))
     validation = sampler_class(config, manifest, list(range(n - t.validation_scenes, n)))
     val_batch, val_target, val_part = devices.split(
@@ -97,7 +99,7 @@ def train(config: Config, progress: bool = True) -> tuple[dict, list[dict]]:
     )  # fmt: skip
     run = RunFolder(config)
     model = make_model(m.architecture, m.width)
-    estimates = shape_estimates(model) if nppm else None
+    estimates = shape_estimates(model) if nppm else caustic_estimates(model) if caustic else None
     optimiser, loss, step = make_steps(model, t.learning_rate, t.loss, t.balance, estimates)
     params = devices.replicate(init_params(model, m.k, t.seed, m.architecture))
     done, params, opt_state, rows = run.restore(params, devices.replicate(optimiser.init(params)))

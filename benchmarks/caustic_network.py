@@ -1,0 +1,194 @@
+"""`auto`'s learned caustic filter against `auto --no-network`, on the unseen scenes' caustics.
+
+    python benchmarks/caustic_network.py [SCENE ...] [--passes 1 2 4 ...] [--times 2 4 8 16]
+                                         [--seeds 1 2] [--set unseen|examples]
+
+On each caustic scene of the unseen set (`benchmarks/scenes/make_unseen.py`, the controls
+left out), at the size of its caustic reference (`caustic_references.py`: SPPM at 2 × 512+
+passes; a uniformly scaled copy is scored against its scale-1 twin's, as
+`equal_time_unseen.py` does), the caustic component (`--component caustic`) is rendered:
+
+- at equal passes (`--passes`): in this process, the same seed with and without the network
+  (the same samples: the ratio is the filter's effect alone);
+- at equal whole-process time (`--times`): `dpm-render --time T` in fresh processes, with and
+  without `--no-network`, alternating which runs first budget after budget (the machine's load
+  falls on both); the network's seconds and share of the run, and the passes, from the stats.
+
+RMSE (`dpm.metrics.rmse`) against the reference, the mean over `--seeds`; ratio = with the
+network / without. The reference's own noise (its halves' RMSE / 2) is recorded beside it.
+Writes results/caustic_network/SET.json and results/caustic_network.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from caustic_references import load_reference
+from equal_time import dpm_run
+
+sys.path.insert(0, str(Path(__file__).parent / "scenes"))
+from make_unseen import CONTROLS, UNSEEN, unit_scale, unseen_scenes  # noqa: E402
+
+from common import RESULTS, cpu, markdown_table  # noqa: E402
+from dpm import load_scene  # noqa: E402
+from dpm.metrics import rmse  # noqa: E402
+from dpm.options import RenderOptions  # noqa: E402
+from dpm.renderer import render  # noqa: E402
+
+OUT = RESULTS / "caustic_network"
+TABLE = RESULTS / "caustic_network.md"
+MAX_WIDTH = 256  # as equal_time_unseen: the references' width
+
+
+def scene_size(name: str) -> tuple[Path, int, int]:
+    """(OBJ path, W, H) of unseen scene `name` at its reference's size."""
+    path = {p.stem: p for p in unseen_scenes()}[name]
+    c = load_scene(path).camera
+    width = min(c.width, MAX_WIDTH)
+    return path, width, max(1, round(c.height * width / c.width))
+
+
+def equal_passes(name: str, passes: list[int], seeds: list[int]) -> list[dict]:
+    """Rows of RMSE with and without the network at each pass count."""
+    path, w, h = scene_size(name)
+    ref, noise, _ = load_reference(unit_scale(name), w, h)
+    scene = load_scene(path)
+    rows = []
+    for p in passes:
+        errors = {True: [], False: []}
+        for seed in seeds:
+            for network in (True, False):
+                options = RenderOptions(component="caustic", spp=p, photons=p * 4 * w * h,
+                                        width=w, height=h, seed=seed, network=network,
+                                        progress=False)  # fmt: skip
+                errors[network].append(rmse(render(scene, options).image, ref))
+        row = {"scene": name, "passes": p, "network": float(np.mean(errors[True])),
+               "plain": float(np.mean(errors[False])), "reference_noise": noise}  # fmt: skip
+        rows.append(row)
+        print(f"{name} {p} passes: network {row['network']:.5f} plain {row['plain']:.5f} "
+              f"ratio {row['network'] / row['plain']:.3f}", flush=True)  # fmt: skip
+    return rows
+
+
+def network_seconds(stats: dict) -> float:
+    """The seconds a render's stats give its caustic filter (loading, warming, running)."""
+    return float(stats["seconds"].get("network", 0.0))
+
+
+def equal_time(name: str, times: list[float], seeds: list[int]) -> list[dict]:
+    """Rows of whole-process RMSE, seconds, passes and the network's share at each budget."""
+    path, w, h = scene_size(name)
+    ref, noise, _ = load_reference(unit_scale(name), w, h)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        caustic = ("--component", "caustic")
+        for extra in ((), ("--no-network",)):  # warm Numba's cache, untimed
+            dpm_run(path, w, h, max(times), 0, folder, caustic + extra)
+        for i, budget in enumerate(times):
+            got = {True: [], False: []}
+            for seed in seeds:
+                order = (True, False) if (i + seed) % 2 == 0 else (False, True)
+                for network in order:
+                    extra = caustic + (() if network else ("--no-network",))
+                    image, seconds, stats = dpm_run(path, w, h, budget, seed, folder, extra)
+                    got[network].append((rmse(image, ref), seconds, stats))
+            row = {"scene": name, "budget": budget, "reference_noise": noise}
+            for network, key in ((True, "network"), (False, "plain")):
+                row[key] = float(np.mean([e for e, _, _ in got[network]]))
+                row[f"{key}_s"] = float(np.mean([s for _, s, _ in got[network]]))
+                row[f"{key}_passes"] = float(np.mean([st["passes"] for *_, st in got[network]]))
+            runs = got[True]
+            row["network_used"] = all(st["plan"]["network"] for *_, st in runs)
+            row["network_share"] = max(network_seconds(st) / s for _, s, st in runs)
+            rows.append(row)
+            print(f"{name} {budget:g} s: network {row['network']:.5f} ({row['network_passes']:.0f}"
+                  f" passes, share {row['network_share']:.1%}) plain {row['plain']:.5f} "
+                  f"({row['plain_passes']:.0f}) ratio {row['network'] / row['plain']:.3f}",
+                  flush=True)  # fmt: skip
+    return rows
+
+
+def geomean(values: list[float]) -> float:
+    """Geometric mean."""
+    return float(np.exp(np.mean(np.log(values))))
+
+
+def report(record: dict) -> str:
+    """The Markdown report of a run."""
+    lines = [
+        "# `auto`'s learned caustic filter against `auto --no-network` (caustic component)",
+        "",
+        "Made by `python benchmarks/caustic_network.py` (see its docstring) on "
+        f"{record['cpu']}, {record['date']}, seeds {record['seeds']}. RMSE against the SPPM",
+        "caustic references of `benchmarks/caustic_references.py`; ratio = with / without the",
+        "network (below 1: the network wins). Unseen scenes: no constant or weight was chosen",
+        "on them.",
+        "",
+    ]
+    if record["passes"]:
+        lines += ["## Equal passes (same samples)", ""]
+        head = ["scene", "passes", "network", "no network", "ratio", "reference noise"]
+        rows = [[x["scene"], str(x["passes"]), f"{x['network']:.5f}", f"{x['plain']:.5f}",
+                 f"{x['network'] / x['plain']:.3f}", f"{x['reference_noise']:.5f}"]
+                for x in record["passes"]]  # fmt: skip
+        lines += [*markdown_table(head, rows), ""]
+        for p in sorted({x["passes"] for x in record["passes"]}):
+            q = [x["network"] / x["plain"] for x in record["passes"] if x["passes"] == p]
+            lines.append(f"- {p} passes: geometric mean {geomean(q):.3f}, range "
+                         f"{min(q):.3f}-{max(q):.3f} over {len(q)} scenes")  # fmt: skip
+        lines.append("")
+    if record["times"]:
+        lines += ["## Equal whole-process time", ""]
+        head = ["scene", "budget s", "network", "passes", "share", "no network", "passes",
+                "ratio"]  # fmt: skip
+        rows = [[x["scene"], f"{x['budget']:g}", f"{x['network']:.5f}",
+                 f"{x['network_passes']:.0f}", f"{x['network_share']:.1%}"
+                 + ("" if x["network_used"] else " (off)"), f"{x['plain']:.5f}",
+                 f"{x['plain_passes']:.0f}", f"{x['network'] / x['plain']:.3f}"]
+                for x in record["times"]]  # fmt: skip
+        lines += [*markdown_table(head, rows), ""]
+        q = [x["network"] / x["plain"] for x in record["times"]]
+        worst = max(record["times"], key=lambda x: x["network"] / x["plain"])
+        lines.append(f"- all budgets: geometric mean {geomean(q):.3f}, worst {max(q):.3f} "
+                     f"({worst['scene']} at {worst['budget']:g} s), "
+                     f"{sum(v > 1.05 for v in q)} rows above 1.05")  # fmt: skip
+        for b in sorted({x["budget"] for x in record["times"]}):
+            qb = [x["network"] / x["plain"] for x in record["times"] if x["budget"] == b]
+            lines.append(f"- {b:g} s: geometric mean {geomean(qb):.3f}, range "
+                         f"{min(qb):.3f}-{max(qb):.3f}")  # fmt: skip
+        share = max(x["network_share"] for x in record["times"])
+        lines.append(f"- the network's largest share of a run: {share:.1%}")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    """Run the comparisons and write the record and the table."""
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("scenes", nargs="*")
+    p.add_argument("--passes", type=int, nargs="*", default=[1, 2, 4, 8, 16, 32])
+    p.add_argument("--times", type=float, nargs="*", default=[2, 4, 8, 16])
+    p.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
+    a = p.parse_args()
+    names = a.scenes or [n for n in UNSEEN if n not in CONTROLS]
+    record = {"cpu": cpu(), "date": str(datetime.date.today()), "seeds": a.seeds,
+              "passes": [], "times": []}  # fmt: skip
+    for name in names:
+        record["passes"] += equal_passes(name, a.passes, a.seeds) if a.passes else []
+    for name in names:
+        record["times"] += equal_time(name, a.times, a.seeds) if a.times else []
+    OUT.mkdir(parents=True, exist_ok=True)
+    (OUT / "unseen.json").write_text(json.dumps(record, indent=1))
+    TABLE.write_text(report(record))
+    print(report(record))
+
+
+if __name__ == "__main__":
+    main()

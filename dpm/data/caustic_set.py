@@ -1,0 +1,108 @@
+"""The caustic filter's training set (`[data] kind = "caustic"`): per procedural scene, `auto`'s
+caustic statistics at a ladder of pass counts and an independent long render as the target.
+
+A shard holds, for each pass count P of `passes`, what `dpm.nn.caustic_stats` makes of the
+render after P passes (`P/features`, `P/candidates`, `P/own`, `P/count`, `P/photon`), and
+`target`: the own estimate of a render of `target_passes` passes with another seed. The
+target is noisy, but its noise is independent of the inputs', so an L2 loss against it has
+the same minimiser as against the truth (Noise2Noise); its bias is SPPM's after that many
+passes. Scenes are `dpm.data.procedural`'s (disjoint from the unseen-scene set, which has a
+generator of its own), at `width`² pixels.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from dpm.data.builder import write_scene
+from dpm.data.procedural import random_scene
+
+if TYPE_CHECKING:
+    from dpm.data.dataset import DataConfig
+    from dpm.nn.caustic_stats import CausticStats
+    from dpm.scene import Scene
+    from dpm.tracer import BVH
+
+PASS_ARRAYS = ("features", "candidates", "own", "count", "photon")  # `P/name` per pass count
+
+
+def caustic_ladder(
+    scene: Scene, bvh: BVH, seed: int, ladder: tuple[int, ...]
+) -> list[CausticStats]:
+    """`auto`'s caustic statistics (component caustic, its photon paths per pass) after each
+    pass count of `ladder` (ascending), from one render with `seed`."""
+    from dpm.methods.auto import Auto, Passes
+    from dpm.options import RenderOptions
+    from dpm.stopwatch import Stopwatch
+
+    camera = scene.camera
+    n = max(ladder)
+    per_pass = round(4.0 * camera.width * camera.height)
+    options = RenderOptions(method="auto", component="caustic", spp=n, photons=n * per_pass,
+                            seed=seed, network=False, progress=False)  # fmt: skip
+    passes = Passes(Auto(scene, options), bvh, camera, Stopwatch(), time.monotonic())
+    out = []
+    while passes.j < n:
+        passes.run_pass()
+        if passes.j in ladder:
+            out.append(passes.caustic_stats())
+    return out
+
+
+def make_caustic_shard(config: DataConfig, index: int, threads: int | None = None) -> tuple:
+    """Make scene `index` and its caustic-filter shard on `threads` Numba threads (default:
+    all); returns its manifest entry and its files, {path relative to `out`: bytes}."""
+    import numba
+
+    from dpm.data.dataset import npz_bytes, shard_name
+    from dpm.nn.caustic_stats import candidates, features
+    from dpm.scene import load_scene
+    from dpm.tracer import build_bvh
+
+    numba.set_num_threads(threads or numba.config.NUMBA_NUM_THREADS)
+    start = time.perf_counter()
+    files = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        comment = f"dpm caustic-filter training scene {index} (seed {config.seed}), by dpm.data"
+        obj = write_scene(random_scene(index, config.seed, config.width), Path(tmp), comment)
+        for path in sorted(Path(tmp).iterdir()):
+            files[f"scenes/{path.name}"] = path.read_bytes()
+        scene = load_scene(obj)
+    bvh = build_bvh(scene)
+    base = (config.seed * 7919 + index) * 4
+    ladder = tuple(sorted(config.passes))
+    arrays = {}
+    for p, s in zip(ladder, caustic_ladder(scene, bvh, base + 1, ladder), strict=True):
+        arrays[f"{p}/features"] = features(s)
+        arrays[f"{p}/candidates"] = candidates(s)
+        arrays[f"{p}/own"] = s.own.reshape(s.h, s.w, 3).astype(np.float32)
+        arrays[f"{p}/count"] = s.own_count.reshape(s.h, s.w).astype(np.float32)
+        arrays[f"{p}/photon"] = np.float32(s.photon_value())
+    (target,) = caustic_ladder(scene, bvh, base + 2, (config.target_passes,))
+    arrays["target"] = target.own.reshape(target.h, target.w, 3).astype(np.float32)
+    shard = f"shards/{shard_name(index)}.npz"
+    files[shard] = npz_bytes(arrays)
+    lit = float(np.mean(arrays["target"]))
+    entry = {"index": index, "file": shard, "points": target.h * target.w,
+             "passes": list(ladder), "target_mean": lit,
+             "seconds": time.perf_counter() - start}  # fmt: skip
+    return entry, files
+
+
+def load_caustic_shard(out: Path, entry: dict, ladder: tuple[int, ...]) -> dict[str, np.ndarray]:
+    """A caustic-filter shard's arrays ({'P/name': array} for P in ladder, and 'target')."""
+    from dpm.errors import InputError
+
+    path = Path(out) / entry["file"]
+    try:
+        with np.load(path) as f:
+            arrays = {f"{p}/{n}": f[f"{p}/{n}"] for p in ladder for n in PASS_ARRAYS}
+            arrays["target"] = f["target"]
+    except Exception as e:  # OSError, KeyError, BadZipFile, zlib.error, ValueError alike
+        raise InputError(f"{path}: unreadable training shard ({type(e).__name__})") from None
+    return arrays

@@ -1,0 +1,108 @@
+"""`auto`'s learned caustic filter: a small screen-space network that predicts, per pixel, a
+kernel over its neighbours' SPPM estimates (kernel prediction, as in learned denoisers), and
+the pure function that applies it.
+
+The network reads `dpm.nn.caustic_stats.features` (scale-free per-pixel statistics and
+guides) and gives TAPS logits per pixel: one per (candidate estimate, neighbour) of
+`caustic_stats.CANDIDATES`; their softmax weighs those estimates. The result is then held
+within CLAMP_Z standard errors of the pixel's own estimate (`clamp`), so whatever the network
+says, as passes add photons the filter's reach shrinks to nothing and the render converges to
+SPPM's. A fresh network's last layer is zero with the pixel's own wide estimate favoured, so
+it starts close to the identity.
+
+Training runs this module under `jax.jit`; a render runs `dpm.nn.caustic_fused`, a Numba
+copy of the same forward pass (tested equal), because importing JAX costs a 2-second render
+most of its budget.
+"""
+
+from __future__ import annotations
+
+import flax.linen as nn
+import jax
+import jax.numpy as jnp
+
+from dpm.nn.caustic_stats import (
+    CHANNELS,
+    CLAMP_Z,
+    DILATIONS,
+    TAPS,
+    TINY,
+    centre_tap,
+    tap_offsets,
+)  # fmt: skip
+
+CENTRE_LOGIT = 6.0  # a fresh network's logit for the pixel's own wide estimate (weight 0.85)
+
+
+def _centre_bias(key: jax.Array, shape: tuple[int, ...], dtype: jnp.dtype = jnp.float32):
+    """The output layer's initial bias: zero but for the pixel's own wide estimate."""
+    return jnp.zeros(shape, dtype).at[centre_tap()].set(CENTRE_LOGIT)
+
+
+class CausticNet(nn.Module):
+    """(..., H, W, TAPS) kernel logits from (..., H, W, CHANNELS) features."""
+
+    width: int = 24
+
+    @nn.compact
+    def __call__(self, x: jnp.ndarray) -> jnp.ndarray:
+        for d in DILATIONS:
+            x = nn.relu(nn.Conv(self.width, (3, 3), kernel_dilation=d, padding="SAME")(x))
+        return nn.Conv(TAPS, (1, 1), kernel_init=nn.initializers.zeros, bias_init=_centre_bias)(x)
+
+
+def example_features() -> jnp.ndarray:
+    """Zero features of a small image, for `init`."""
+    return jnp.zeros((8, 8, CHANNELS), jnp.float32)
+
+
+def gather_taps(candidates: jnp.ndarray) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """(H, W, TAPS, 3) each tap's estimate at each pixel and (H, W, TAPS) bool whether the tap
+    lies inside the image, from (C, H, W, 3) candidates."""
+    _, h, w, _ = candidates.shape
+    offsets = tap_offsets()
+    reach = int(abs(offsets[:, 1:]).max())
+    padded = jnp.pad(candidates, ((0, 0), (reach, reach), (reach, reach), (0, 0)))
+    inside = jnp.pad(jnp.ones((h, w), bool), reach)
+    taps, masks = [], []
+    for c, dy, dx in offsets:
+        y, x = reach + int(dy), reach + int(dx)
+        taps.append(padded[c, y : y + h, x : x + w])
+        masks.append(inside[y : y + h, x : x + w])
+    return jnp.stack(taps, axis=2), jnp.stack(masks, axis=2)
+
+
+def apply_kernel(logits: jnp.ndarray, candidates: jnp.ndarray) -> jnp.ndarray:
+    """(H, W, 3) the candidates (C, H, W, 3) weighed by the softmax of the (H, W, TAPS) logits
+    over the taps inside the image."""
+    taps, inside = gather_taps(candidates)
+    weights = jax.nn.softmax(jnp.where(inside, logits, -1e30), axis=-1)
+    return jnp.einsum("hwt,hwtc->hwc", weights, taps)
+
+
+def luminance(rgb: jnp.ndarray) -> jnp.ndarray:
+    """(...) Rec. 709 luminance of (..., 3) linear RGB (as dpm.density.base.luminance)."""
+    return rgb @ jnp.array([0.2126, 0.7152, 0.0722], rgb.dtype)
+
+
+def clamp(filtered: jnp.ndarray, own: jnp.ndarray, count: jnp.ndarray, photon: jnp.ndarray):
+    """(..., 3) `filtered` held within CLAMP_Z standard errors of `own` (..., 3) (as
+    `caustic_stats.clamp_to_own`; count (...): photons behind own, photon: one photon's
+    luminance)."""
+    lo, lf = luminance(own), luminance(filtered)
+    error = jnp.where(count > 0, jnp.maximum(lo, lf) / jnp.sqrt(jnp.maximum(count, 1.0)),
+                      jnp.minimum(lf, photon))  # fmt: skip
+    reach = CLAMP_Z * error + TINY
+    keep = reach / jnp.maximum(jnp.abs(lf - lo) + TINY, reach)  # 1 within reach (no where:
+    return own + keep[..., None] * (filtered - own)  # its untaken branch's gradient is NaN)
+
+
+def filter_caustics(
+    model: nn.Module, params: dict, features: jnp.ndarray, candidates: jnp.ndarray,
+    own: jnp.ndarray, count: jnp.ndarray, photon: jnp.ndarray,
+) -> jnp.ndarray:  # fmt: skip
+    """(H, W, 3) filtered caustic radiance of one image: features (H, W, CHANNELS), candidates
+    (C, H, W, 3), own (H, W, 3) and count (H, W) the pixel's own estimate and its photons,
+    photon () one photon's luminance. Pure: jit and vmap it."""
+    logits = model.apply(params, features)
+    return clamp(apply_kernel(logits, candidates), own, count, photon)

@@ -1,0 +1,113 @@
+"""What `auto`'s learned caustic filter sees of a render in passes: per-pixel SPPM statistics,
+the view-relative features made from them, and the candidate estimates its kernel weighs.
+
+NumPy only (no JAX), so a render can form them without importing JAX; the network that reads
+them is `dpm.nn.caustic_net` (training, pure JAX) and `dpm.nn.caustic_fused` (the render's
+Numba copy of its forward pass). Every feature is scale-free: radiance over the image's mean
+caustic, radii in pixel footprints, depth relative to the median pixel's, so a scene's size
+and brightness do not matter.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from dpm.density.base import luminance
+from dpm.filters import box_mean
+
+CHANNELS = 15  # features per pixel (`features`)
+# (candidate, dilation, taps per side) of `candidates`: the wide and the narrow estimates at
+# the 5 × 5 neighbouring pixels; the wide one's 3 × 3 and 9 × 9 means at every third and
+# ninth pixel (reaching ±6 and ±18 pixels: sparse photons at few passes); the pixel's own
+# estimate with sparse pixels spread (`auto.spread_sparse`)
+CANDIDATES = ((0, 1, 5), (1, 1, 5), (2, 3, 5), (3, 9, 5), (4, 1, 1))
+TAPS = sum(size * size for *_, size in CANDIDATES)  # kernel weights per pixel
+SPREAD = 4  # the candidate that is the render's caustic without the network
+DILATIONS = (1, 2, 4, 8)  # of the network's four 3 × 3 layers: it sees 31 × 31 pixels
+CLAMP_Z = 2.0  # standard errors of the pixel's own estimate the filter may move it
+TINY = 1e-12  # radiance far below any caustic's, keeping the clamp's ratio finite
+
+
+@dataclass
+class CausticStats:
+    """One render's caustic statistics after `passes` passes, per pixel of an h × w image
+    (flattened, row-major)."""
+
+    h: int
+    w: int
+    passes: int
+    wide: np.ndarray  # (P, 3) float64 caustic radiance at the wide radius (W m⁻² sr⁻¹)
+    narrow: np.ndarray  # (P, 3) float64 the same at the narrow radius
+    wide_count: np.ndarray  # (P,) float64 photons in the wide disc (PPM's N)
+    narrow_count: np.ndarray  # (P,) float64 photons in the narrow disc
+    own: np.ndarray  # (P, 3) float64 the estimate without the network (Lepski's choice)
+    own_count: np.ndarray  # (P,) float64 photons behind `own`
+    spread: np.ndarray  # (P, 3) float64 `own` with its sparse pixels spread (no network)
+    radius: np.ndarray  # (P,) float64 wide radius in pixel footprints
+    depth: np.ndarray  # (P,) float64 log(footprint / the median pixel's footprint)
+    albedo: np.ndarray  # (P, 3) float64 mean albedo guide in [0, 1]
+    normal: np.ndarray  # (P, 3) float64 mean normal guide
+
+    def photon_value(self) -> float:
+        """Luminance one photon adds to a pixel, on average over the pixels holding any (the
+        error of a pixel whose disc holds none: it shrinks as passes add paths)."""
+        held = self.wide_count > 0
+        if not held.any():
+            return 0.0
+        return float(luminance(self.wide[held]).sum() / self.wide_count[held].sum())
+
+
+def features(s: CausticStats) -> np.ndarray:
+    """(h, w, CHANNELS) float32 scale-free inputs of the filter network per pixel: log
+    radiance (wide, narrow, spread) over the image's mean, log photon counts, relative error, log
+    radius in footprints, albedo, normal, relative depth, log passes."""
+    lw, ln, ls = luminance(s.wide), luminance(s.narrow), luminance(s.spread)
+    hit = s.albedo.max(axis=1) > 0
+    scale = max(float(lw[hit].mean()) if hit.any() else 0.0, 1e-30)
+    cols = [
+        np.log1p(lw / scale), np.log1p(ln / scale), np.log1p(ls / scale),
+        np.log1p(s.wide_count) / 4, np.log1p(s.narrow_count) / 4,
+        1 / np.sqrt(np.maximum(s.wide_count, 1)), np.log(np.maximum(s.radius, 1e-3)),
+        *s.albedo.T, *s.normal.T, s.depth, np.full(len(lw), np.log1p(s.passes) / 4),
+    ]  # fmt: skip
+    return np.stack(cols, axis=1).astype(np.float32).reshape(s.h, s.w, CHANNELS)
+
+
+def candidates(s: CausticStats) -> np.ndarray:
+    """(5, h, w, 3) float32 the estimates the kernel weighs: wide, narrow, the wide one's
+    3 × 3 and 9 × 9 means (over the pixels inside the image), and the spread one."""
+    wide = s.wide.reshape(s.h, s.w, 3)
+    means = []
+    for size in (3, 9):
+        inside = box_mean(np.ones((s.h, s.w)), size)
+        means.append(box_mean(wide, (size, size, 1)) / inside[..., None])
+    narrow, spread = (a.reshape(s.h, s.w, 3) for a in (s.narrow, s.spread))
+    return np.stack([wide, narrow, *means, spread]).astype(np.float32)
+
+
+def tap_offsets() -> np.ndarray:
+    """(TAPS, 3) int: candidate, row offset and column offset of each kernel weight."""
+    return np.array([(c, dy * d, dx * d) for c, d, size in CANDIDATES
+                     for dy in range(-(size // 2), size // 2 + 1)
+                     for dx in range(-(size // 2), size // 2 + 1)])  # fmt: skip
+
+
+def centre_tap() -> int:
+    """Index of the wide estimate's own pixel among the taps (a fresh network favours it)."""
+    return CANDIDATES[0][2] ** 2 // 2
+
+
+def clamp_to_own(s: CausticStats, filtered: np.ndarray) -> np.ndarray:
+    """(P, 3) float64: `filtered` (P, 3) moved back toward the pixel's own estimate until its
+    luminance lies within CLAMP_Z standard errors of it (1/√photons of the larger of the two,
+    or one photon's value where the disc holds none), so as passes add photons the result
+    converges to the own (consistent) estimate whatever the network says."""
+    own, lo, lf = s.own, luminance(s.own), luminance(filtered)
+    count = s.own_count
+    error = np.where(count > 0, np.maximum(lo, lf) / np.sqrt(np.maximum(count, 1)),
+                     np.minimum(lf, s.photon_value()))  # fmt: skip
+    reach = CLAMP_Z * error + TINY
+    keep = reach / np.maximum(np.abs(lf - lo) + TINY, reach)
+    return own + keep[:, None] * (filtered - own)

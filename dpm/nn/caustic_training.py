@@ -1,0 +1,80 @@
+"""Training batches of auto's caustic filter: whole training images at one pass count each.
+
+A `CausticSampler` serves some scenes of a caustic set (`dpm.data.caustic_set`): each batch
+holds `size` (scene, pass count) images, drawn from the generator it is given alone (so a
+resumed run repeats an uninterrupted one), with the long render's target per pixel. Each
+image is its own part of the balanced loss: its error over that of the render's caustic without
+the network (SPPM at Lepski's radius, sparse pixels spread), so dim and bright scenes, one pass
+and 128, count alike, each for how much it beats the render without the network.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from dpm.data.caustic_set import load_caustic_shard
+from dpm.nn.caustic_net import filter_caustics
+from dpm.nn.caustic_stats import SPREAD
+from dpm.nn.config import Config
+
+
+class CausticBatch(NamedTuple):
+    """Images of the caustic statistics (leading axis: image)."""
+
+    features: np.ndarray  # (B, H, W, CHANNELS) float32
+    candidates: np.ndarray  # (B, C, H, W, 3) float32 candidate estimates
+    own: np.ndarray  # (B, H, W, 3) float32 the estimate without the network
+    count: np.ndarray  # (B, H, W) float32 photons behind `own`
+    photon: np.ndarray  # (B,) float32 one photon's luminance
+
+
+class CausticSampler:
+    """Batches of whole images of some scenes of a caustic set, with their targets."""
+
+    def __init__(self, config: Config, manifest: dict, indices: list[int]) -> None:
+        out = Path(config.data.out)
+        self.ladder = tuple(sorted(config.data.passes))
+        entries = {e["index"]: e for e in manifest["shards"]}
+        self.shards = [load_caustic_shard(out, entries[i], self.ladder) for i in indices]
+        self.choices = [(i, p) for i in range(len(self.shards)) for p in self.ladder]
+
+    def draw(
+        self, rng: np.random.Generator, size: int, parts: int
+    ) -> tuple[CausticBatch, np.ndarray, np.ndarray]:
+        """A CausticBatch of `size` images (every (scene, pass count) in order when `size` is
+        their number, else drawn at random; `parts` is unused: each image is a part), the
+        (size·H·W, 3) target radiance and (size·H·W,) int32 the image of each pixel."""
+        if size == len(self.choices):
+            picks = range(size)
+        else:
+            picks = rng.integers(len(self.choices), size=size)
+        rows = [self.choices[k] for k in picks]
+        get = [(self.shards[i], p) for i, p in rows]
+        names = ("features", "candidates", "own", "count", "photon")
+        batch = CausticBatch(*(np.stack([s[f"{p}/{n}"] for s, p in get]) for n in names))
+        target = np.stack([s["target"] for s, _ in get])
+        pixels = target.shape[1] * target.shape[2]
+        part = np.repeat(np.arange(size, dtype=np.int32), pixels)
+        return batch, target.reshape(-1, 3), part
+
+
+def caustic_estimates(model) -> Callable:
+    """estimates(params, batch) -> ((N, 3) the filter's radiance, (N, 3) the render's without
+    the network: the spread candidate) over a CausticBatch's pixels, for
+    `dpm.nn.train.make_steps`."""
+    one = jax.vmap(
+        lambda params, f, c, o, n, p: filter_caustics(model, params, f, c, o, n, p),
+        (None, 0, 0, 0, 0, 0),
+    )
+
+    def estimates(params: dict, b: CausticBatch) -> tuple[jnp.ndarray, jnp.ndarray]:
+        out = one(params, b.features, b.candidates, b.own, b.count, b.photon)
+        return out.reshape(-1, 3), b.candidates[:, SPREAD].reshape(-1, 3)
+
+    return estimates

@@ -1,0 +1,181 @@
+"""`auto`'s learned caustic filter: the render's Numba copy equals the JAX network, the clamp
+holds whatever the network says, a fresh network leaves SPPM's estimate within its noise, the
+error falls pass after pass, the output does not depend on threads, and bad weights are
+refused in one line."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numba
+import numpy as np
+import pytest
+from test_auto import CAMERA, GLASS_MTL, GLASS_OBJ
+from test_truths import mirror_scene
+
+from conftest import write_scene
+from dpm import load_scene
+from dpm.density.base import luminance
+from dpm.errors import InputError
+from dpm.methods.auto import Auto, Passes
+from dpm.metrics import rmse
+from dpm.nn import caustic_fused
+from dpm.nn.caustic_net import CausticNet, example_features, filter_caustics
+from dpm.nn.caustic_stats import CLAMP_Z, DILATIONS, CausticStats, candidates, features
+from dpm.nn.weights import Weights, save_weights
+from dpm.renderer import RenderOptions, render
+from dpm.stopwatch import Stopwatch
+from dpm.tracer import build_bvh
+
+
+def stats_after(scene, passes: int, seed: int = 1) -> CausticStats:
+    """auto's caustic statistics after `passes` passes (component caustic)."""
+    c = scene.camera
+    per_pass = 4 * c.width * c.height
+    o = RenderOptions(component="caustic", spp=passes, photons=passes * per_pass, seed=seed,
+                      progress=False)  # fmt: skip
+    run = Passes(Auto(scene, o), build_bvh(scene), c, Stopwatch(), 0.0)
+    for _ in range(passes):
+        run.run_pass()
+    return run.caustic_stats()
+
+
+def random_network(tmp_path: Path, scale: float, seed: int = 1) -> tuple[CausticNet, dict, Path]:
+    """A caustic network with random parameters (scale: their spread), saved as a weight file."""
+    model = CausticNet(24)
+    params = model.init(jax.random.key(0), example_features())
+    leaves, tree = jax.tree.flatten(params)
+    keys = jax.random.split(jax.random.key(seed), len(leaves))
+    noisy = [a + scale * jax.random.normal(k, a.shape) for a, k in zip(leaves, keys, strict=True)]
+    params = jax.tree.unflatten(tree, noisy)
+    path = tmp_path / "caustic.msgpack"
+    save_weights(path, Weights("caustic", 24, 1, jax.tree.map(np.asarray, params)))
+    return model, params, path
+
+
+def errors(s: CausticStats, out: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(P,) how far out moved each pixel's luminance from its own estimate, and CLAMP_Z of its
+    standard errors (`caustic_stats.clamp_to_own`)."""
+    lo, lf = luminance(s.own), luminance(out)
+    se = np.where(s.own_count > 0, np.maximum(lo, lf) / np.sqrt(np.maximum(s.own_count, 1)),
+                  np.minimum(lf, s.photon_value()))  # fmt: skip
+    return np.abs(lf - lo), CLAMP_Z * se
+
+
+@pytest.fixture(scope="module")
+def glass_stats(tmp_path_factory) -> CausticStats:
+    folder = tmp_path_factory.mktemp("glass")
+    return stats_after(load_scene(write_scene(folder, GLASS_OBJ, GLASS_MTL, CAMERA)), 6)
+
+
+def test_the_renders_numba_filter_equals_the_jax_network(glass_stats, tmp_path) -> None:
+    s = glass_stats
+    model, params, path = random_network(tmp_path, 0.3)
+    ours = caustic_fused.filter_caustics(caustic_fused.load_filter(path), s)
+    own = jnp.asarray(s.own.reshape(s.h, s.w, 3), jnp.float32)
+    count = jnp.asarray(s.own_count.reshape(s.h, s.w), jnp.float32)
+    theirs = filter_caustics(model, params, jnp.asarray(features(s)), jnp.asarray(candidates(s)),
+                             own, count, jnp.float32(s.photon_value()))  # fmt: skip
+    theirs = np.asarray(theirs).reshape(-1, 3)
+    assert np.abs(ours - s.own).max() > 1e-3 * np.abs(s.own).max()  # the network did move it
+    np.testing.assert_allclose(ours, theirs, rtol=1e-4, atol=1e-5 * np.abs(theirs).max())
+
+
+def test_whatever_the_network_says_no_pixel_moves_past_its_error(glass_stats, tmp_path) -> None:
+    s = glass_stats
+    for seed in (1, 2, 3):
+        _, _, path = random_network(tmp_path, 3.0, seed)  # wild weights
+        out = caustic_fused.filter_caustics(caustic_fused.load_filter(path), s)
+        move, allowed = errors(s, out)
+        assert (move <= allowed * (1 + 1e-9) + 1e-12).all()
+        assert np.isfinite(out).all() and (out >= 0).all()
+
+
+def test_a_fresh_network_leaves_sppm_unchanged_within_noise(glass_stats, tmp_path) -> None:
+    s = glass_stats
+    _, _, path = random_network(tmp_path, 0.0)  # as `init` makes it
+    out = caustic_fused.filter_caustics(caustic_fused.load_filter(path), s)
+    move, allowed = errors(s, out)
+    lit = luminance(s.own) > 0
+    # within one standard error (half the clamp's reach) on average, and nowhere past the clamp
+    assert move[lit].mean() < 0.5 * allowed[lit].mean()
+    assert (move <= allowed * (1 + 1e-9) + 1e-12).all()
+
+
+def test_with_the_network_the_error_falls_pass_after_pass(tmp_path) -> None:
+    # the mirror scene of the table of truths: a caustic whose truth is known; the reference
+    # here is a long render without the network (what the filter must converge to)
+    scene = load_scene(mirror_scene(tmp_path))
+    c = scene.camera
+    per_pass = 4 * c.width * c.height
+    base = dict(component="caustic", progress=False)
+
+    def image(passes: int, network: bool, seed: int) -> np.ndarray:
+        o = RenderOptions(spp=passes, photons=passes * per_pass, seed=seed, network=network,
+                          **base)  # fmt: skip
+        return render(scene, o).image
+
+    reference = image(512, False, 99)
+    errors = [np.mean([rmse(image(p, True, s), reference) for s in (1, 2)]) for p in (2, 8, 32)]
+    assert errors[0] > errors[1] > errors[2], errors
+
+
+def test_the_filter_does_not_depend_on_the_thread_count(glass_stats) -> None:
+    weights = caustic_fused.load_filter()
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = caustic_fused.filter_caustics(weights, glass_stats)
+        numba.set_num_threads(threads)
+        many = caustic_fused.filter_caustics(weights, glass_stats)
+    finally:
+        numba.set_num_threads(threads)
+    assert np.array_equal(one, many)
+
+
+def test_the_shipped_filter_is_used_by_default_and_no_network_turns_it_off(glass) -> None:
+    on = render(glass, RenderOptions(spp=4, photons=8000, progress=False))
+    off = render(glass, RenderOptions(spp=4, photons=8000, network=False, progress=False))
+    assert on.stats["plan"]["network"] and not off.stats["plan"]["network"]
+    assert "learned caustic filter" in on.stats["plan"]["reason"]
+    assert not np.array_equal(on.image, off.image)
+
+
+@pytest.fixture
+def glass(tmp_path: Path):
+    return load_scene(write_scene(tmp_path, GLASS_OBJ, GLASS_MTL, CAMERA))
+
+
+def test_a_bad_weight_file_is_one_line_and_exit_status_2(tmp_path: Path) -> None:
+    path = write_scene(tmp_path, GLASS_OBJ, GLASS_MTL, CAMERA)
+    corrupt = tmp_path / "corrupt.msgpack"
+    corrupt.write_bytes(b"\x93not a weight file")
+    other = Path(caustic_fused.__file__).parent / "weights" / "dpm-50.msgpack"
+    for weights, words in ((corrupt, "not a dpm weight file"), (other, "not the caustic filter"),
+                           (tmp_path / "missing.msgpack", "not found")):  # fmt: skip
+        out = tmp_path / "o.exr"
+        run = subprocess.run(
+            [sys.executable, "-m", "dpm.cli", str(path), "--spp", "2", "--weights", str(weights),
+             "-o", str(out), "--quiet"],
+            capture_output=True, text=True,
+        )  # fmt: skip
+        assert run.returncode == 2, run.stderr
+        assert words in run.stderr and len(run.stderr.strip().splitlines()) == 1, run.stderr
+        assert not out.exists()
+
+
+def test_weights_that_do_not_fit_are_refused(tmp_path: Path) -> None:
+    model = CausticNet(8)
+    params = jax.tree.map(np.asarray, model.init(jax.random.key(0), example_features()))
+    path = tmp_path / "narrow.msgpack"
+    save_weights(path, Weights("caustic", 8, 1, params))
+    assert caustic_fused.load_filter(path).out_kernel.shape[0] == 8  # any width fits
+    last = params["params"][f"Conv_{len(DILATIONS)}"]
+    last["bias"] = last["bias"][:5]
+    save_weights(path, Weights("caustic", 8, 1, params))
+    with pytest.raises(InputError, match="do not fit"):
+        caustic_fused.load_filter(path)
