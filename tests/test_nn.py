@@ -534,7 +534,8 @@ def test_a_caustic_filter_trains_and_the_render_reads_its_weights(tmp_path: Path
                      ("width = 64", "width = 16"),
                      ("passes = [1, 2, 4, 8, 16, 32, 64, 128]", "passes = [1, 3]"),
                      ("target_passes = 512", "target_passes = 8"), ("steps = 3000", "steps = 3"),
-                     ("batch = 16 ", "batch = 2 "), ("scenes_per_batch = 16", "scenes_per_batch = 2"),
+                     ("batch = 16 ", "batch = 2 "),
+                     ("scenes_per_batch = 16", "scenes_per_batch = 2"),
                      ("validation_scenes = 12", "validation_scenes = 1"),
                      ("validation_points = 96", "validation_points = 2"),
                      ("workers = 0", "workers = 1")):  # fmt: skip
