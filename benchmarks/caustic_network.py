@@ -51,7 +51,7 @@ def scene_size(name: str) -> tuple[Path, int, int]:
     path = {p.stem: p for p in unseen_scenes()}[name]
     c = load_scene(path).camera
     width = min(c.width, MAX_WIDTH)
-    return path, width, max(1, round(c.height * width / c.width))
+    return path, width, max(1, width * c.height // c.width)
 
 
 def equal_passes(name: str, passes: list[int], seeds: list[int]) -> list[dict]:

@@ -1,6 +1,6 @@
 """Per-pixel caustic references of the unseen scenes, for `auto`'s caustic component.
 
-    python benchmarks/caustic_references.py [--passes 1024] [--scenes NAME ...]
+    python benchmarks/caustic_references.py [--passes 512] [--scenes NAME ...]
 
 `auto --component caustic` averages, per pixel, SPPM's estimates at one jittered visible
 point per pass, so its limit is the caustic radiance the camera sees averaged over the
@@ -57,7 +57,7 @@ def make(name: str, passes: int) -> None:
     scene = load_scene(SCENES / f"{name}.obj")
     c = scene.camera
     width = min(c.width, MAX_WIDTH)
-    height = max(1, round(c.height * width / c.width))
+    height = max(1, width * c.height // c.width)
     path = reference_file(name, width, height)
     if path.exists():
         with np.load(path) as f:
@@ -79,7 +79,7 @@ def make(name: str, passes: int) -> None:
 def main() -> None:
     """Make the missing references."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--passes", type=int, default=1024)
+    p.add_argument("--passes", type=int, default=512)
     p.add_argument("--scenes", nargs="*")
     a = p.parse_args()
     names = a.scenes or sorted(

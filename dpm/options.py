@@ -69,7 +69,8 @@ class RenderOptions:
     )  # fmt: skip
     weights: Path | None = _option(
         None, "network weights from dpm-train", scoped=True, sidecar=False,
-        default_text="the shipped model for --k", metavar="FILE.msgpack", supersedes=("k",),
+        default_text="the shipped model for --k (auto: the shipped caustic filter)",
+        metavar="FILE.msgpack", supersedes=("k",),
     )  # fmt: skip
     caustic_spp: int | None = _option(
         None, "estimate caustics at the first N samples per pixel only", scoped=True,

@@ -150,7 +150,7 @@ def test_a_scene_without_mirror_or_glass_traces_no_photons(diffuse) -> None:
 
 
 def test_the_default_render_never_imports_jax(tmp_path: Path) -> None:
-    # auto's caustic filter runs in Numba (dpm.nn.caustic_fused): importing JAX would cost a
+    # auto's caustic filter runs in Numba (dpm.caustic.forward): importing JAX would cost a
     # short render most of its budget.
     path = write_scene(tmp_path, GLASS_OBJ, GLASS_MTL, CAMERA)
     stats = tmp_path / "stats.json"
@@ -165,7 +165,9 @@ def test_the_default_render_never_imports_jax(tmp_path: Path) -> None:
 
 
 def three_renders(scene, **kw) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The (H, W, 3) images of one auto render: denoised, not denoised, caustics alone."""
+    """The (H, W, 3) images of one auto render: denoised, not denoised, caustics alone (SPPM's:
+    the learned caustic filter, tested in test_caustic_filter.py, left out)."""
+    kw.setdefault("network", False)
     full = render(scene, options(**kw)).image
     plain = render(scene, options(**kw, denoise=False)).image
     caustic = render(scene, options(**kw, component="caustic")).image

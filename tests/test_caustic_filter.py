@@ -19,13 +19,13 @@ from test_truths import mirror_scene
 
 from conftest import write_scene
 from dpm import load_scene
+from dpm.caustic import forward as caustic_forward
+from dpm.caustic.stats import CLAMP_Z, DILATIONS, CausticStats, candidates, features
 from dpm.density.base import luminance
 from dpm.errors import InputError
 from dpm.methods.auto import Auto, Passes
 from dpm.metrics import rmse
-from dpm.nn import caustic_fused
 from dpm.nn.caustic_net import CausticNet, example_features, filter_caustics
-from dpm.nn.caustic_stats import CLAMP_Z, DILATIONS, CausticStats, candidates, features
 from dpm.nn.weights import Weights, save_weights
 from dpm.renderer import RenderOptions, render
 from dpm.stopwatch import Stopwatch
@@ -37,7 +37,7 @@ def stats_after(scene, passes: int, seed: int = 1) -> CausticStats:
     c = scene.camera
     per_pass = 4 * c.width * c.height
     o = RenderOptions(component="caustic", spp=passes, photons=passes * per_pass, seed=seed,
-                      progress=False)  # fmt: skip
+                      network=False, progress=False)  # fmt: skip
     run = Passes(Auto(scene, o), build_bvh(scene), c, Stopwatch(), 0.0)
     for _ in range(passes):
         run.run_pass()
@@ -57,13 +57,16 @@ def random_network(tmp_path: Path, scale: float, seed: int = 1) -> tuple[Caustic
     return model, params, path
 
 
-def errors(s: CausticStats, out: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(P,) how far out moved each pixel's luminance from its own estimate, and CLAMP_Z of its
-    standard errors (`caustic_stats.clamp_to_own`)."""
-    lo, lf = luminance(s.own), luminance(out)
-    se = np.where(s.own_count > 0, np.maximum(lo, lf) / np.sqrt(np.maximum(s.own_count, 1)),
-                  np.minimum(lf, s.photon_value()))  # fmt: skip
-    return np.abs(lf - lo), CLAMP_Z * se
+def moves(weights, s: CausticStats) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(P, 3) the filter's output, how far it moved each channel from the pixel's own
+    estimate, and CLAMP_Z standard errors there: 1/√photons of the larger of the own and the
+    network's (unclamped) value, or the smaller of that value and one photon's."""
+    raw = caustic_forward.kernel_output(weights, features(s), candidates(s)).reshape(-1, 3)
+    out = caustic_forward.filter_caustics(weights, s)
+    n = s.own_count[:, None]
+    se = np.where(n > 0, np.maximum(s.own, raw) / np.sqrt(np.maximum(n, 1)),
+                  np.minimum(raw, s.photon_value()))  # fmt: skip
+    return out, np.abs(out - s.own), CLAMP_Z * se
 
 
 @pytest.fixture(scope="module")
@@ -75,7 +78,7 @@ def glass_stats(tmp_path_factory) -> CausticStats:
 def test_the_renders_numba_filter_equals_the_jax_network(glass_stats, tmp_path) -> None:
     s = glass_stats
     model, params, path = random_network(tmp_path, 0.3)
-    ours = caustic_fused.filter_caustics(caustic_fused.load_filter(path), s)
+    ours = caustic_forward.filter_caustics(caustic_forward.load_filter(path), s)
     own = jnp.asarray(s.own.reshape(s.h, s.w, 3), jnp.float32)
     count = jnp.asarray(s.own_count.reshape(s.h, s.w), jnp.float32)
     theirs = filter_caustics(model, params, jnp.asarray(features(s)), jnp.asarray(candidates(s)),
@@ -87,23 +90,24 @@ def test_the_renders_numba_filter_equals_the_jax_network(glass_stats, tmp_path) 
 
 def test_whatever_the_network_says_no_pixel_moves_past_its_error(glass_stats, tmp_path) -> None:
     s = glass_stats
+    clamped = 0
     for seed in (1, 2, 3):
         _, _, path = random_network(tmp_path, 3.0, seed)  # wild weights
-        out = caustic_fused.filter_caustics(caustic_fused.load_filter(path), s)
-        move, allowed = errors(s, out)
-        assert (move <= allowed * (1 + 1e-9) + 1e-12).all()
-        assert np.isfinite(out).all() and (out >= 0).all()
+        out, move, allowed = moves(caustic_forward.load_filter(path), s)
+        assert (move <= allowed * (1 + 1e-6) + 1e-11).all()
+        assert np.isfinite(out).all() and (out >= 0).all(), out.min()
+        clamped += int(np.isclose(move, allowed, rtol=1e-6).any(axis=1).sum())
+    assert clamped > 0  # the clamp did bind somewhere
 
 
 def test_a_fresh_network_leaves_sppm_unchanged_within_noise(glass_stats, tmp_path) -> None:
     s = glass_stats
     _, _, path = random_network(tmp_path, 0.0)  # as `init` makes it
-    out = caustic_fused.filter_caustics(caustic_fused.load_filter(path), s)
-    move, allowed = errors(s, out)
+    _, move, allowed = moves(caustic_forward.load_filter(path), s)
     lit = luminance(s.own) > 0
     # within one standard error (half the clamp's reach) on average, and nowhere past the clamp
     assert move[lit].mean() < 0.5 * allowed[lit].mean()
-    assert (move <= allowed * (1 + 1e-9) + 1e-12).all()
+    assert (move <= allowed * (1 + 1e-6) + 1e-11).all()
 
 
 def test_with_the_network_the_error_falls_pass_after_pass(tmp_path) -> None:
@@ -125,13 +129,13 @@ def test_with_the_network_the_error_falls_pass_after_pass(tmp_path) -> None:
 
 
 def test_the_filter_does_not_depend_on_the_thread_count(glass_stats) -> None:
-    weights = caustic_fused.load_filter()
+    weights = caustic_forward.load_filter()
     threads = numba.get_num_threads()
     try:
         numba.set_num_threads(1)
-        one = caustic_fused.filter_caustics(weights, glass_stats)
+        one = caustic_forward.filter_caustics(weights, glass_stats)
         numba.set_num_threads(threads)
-        many = caustic_fused.filter_caustics(weights, glass_stats)
+        many = caustic_forward.filter_caustics(weights, glass_stats)
     finally:
         numba.set_num_threads(threads)
     assert np.array_equal(one, many)
@@ -154,7 +158,7 @@ def test_a_bad_weight_file_is_one_line_and_exit_status_2(tmp_path: Path) -> None
     path = write_scene(tmp_path, GLASS_OBJ, GLASS_MTL, CAMERA)
     corrupt = tmp_path / "corrupt.msgpack"
     corrupt.write_bytes(b"\x93not a weight file")
-    other = Path(caustic_fused.__file__).parent / "weights" / "dpm-50.msgpack"
+    other = Path(caustic_forward.__file__).parent / "weights" / "dpm-50.msgpack"
     for weights, words in ((corrupt, "not a dpm weight file"), (other, "not the caustic filter"),
                            (tmp_path / "missing.msgpack", "not found")):  # fmt: skip
         out = tmp_path / "o.exr"
@@ -173,9 +177,9 @@ def test_weights_that_do_not_fit_are_refused(tmp_path: Path) -> None:
     params = jax.tree.map(np.asarray, model.init(jax.random.key(0), example_features()))
     path = tmp_path / "narrow.msgpack"
     save_weights(path, Weights("caustic", 8, 1, params))
-    assert caustic_fused.load_filter(path).out_kernel.shape[0] == 8  # any width fits
+    assert caustic_forward.load_filter(path).out_kernel.shape[0] == 8  # any width fits
     last = params["params"][f"Conv_{len(DILATIONS)}"]
     last["bias"] = last["bias"][:5]
     save_weights(path, Weights("caustic", 8, 1, params))
     with pytest.raises(InputError, match="do not fit"):
-        caustic_fused.load_filter(path)
+        caustic_forward.load_filter(path)

@@ -430,6 +430,11 @@ def test_weight_files_round_trip(tmp_path: Path) -> None:
             'architecture = "caustic"\n',
             "below target_passes",
         ),
+        (
+            '[data]\nout = "d"\nkind = "caustic"\npasses = [2, 1]\n[model]\n'
+            'architecture = "caustic"\n',
+            "increasing",
+        ),
     ],
 )
 def test_bad_configs_are_one_line(
@@ -526,7 +531,7 @@ def test_relmse_and_mse_teach_the_mean_of_noisy_targets_and_mu_law_does_not() ->
 
 
 def test_a_caustic_filter_trains_and_the_render_reads_its_weights(tmp_path: Path) -> None:
-    from dpm.nn.caustic_fused import load_filter
+    from dpm.caustic.forward import load_filter
 
     text = (ROOT / "configs" / "caustic.toml").read_text()
     for old, new in (('"runs/caustic-data"', f'"{tmp_path / "data"}"'),

@@ -1,7 +1,7 @@
 """The caustic filter's training set (`[data] kind = "caustic"`): per procedural scene, `auto`'s
 caustic statistics at a ladder of pass counts and an independent long render as the target.
 
-A shard holds, for each pass count P of `passes`, what `dpm.nn.caustic_stats` makes of the
+A shard holds, for each pass count P of `passes`, what `dpm.caustic.stats` makes of the
 render after P passes (`P/features`, `P/candidates`, `P/own`, `P/count`, `P/photon`), and
 `target`: the own estimate of a render of `target_passes` passes with another seed. The
 target is noisy, but its noise is independent of the inputs', so an L2 loss against it has
@@ -23,8 +23,8 @@ from dpm.data.builder import write_scene
 from dpm.data.procedural import random_scene
 
 if TYPE_CHECKING:
+    from dpm.caustic.stats import CausticStats
     from dpm.data.dataset import DataConfig
-    from dpm.nn.caustic_stats import CausticStats
     from dpm.scene import Scene
     from dpm.tracer import BVH
 
@@ -59,8 +59,8 @@ def make_caustic_shard(config: DataConfig, index: int, threads: int | None = Non
     all); returns its manifest entry and its files, {path relative to `out`: bytes}."""
     import numba
 
+    from dpm.caustic.stats import candidates, features
     from dpm.data.dataset import npz_bytes, shard_name
-    from dpm.nn.caustic_stats import candidates, features
     from dpm.scene import load_scene
     from dpm.tracer import build_bvh
 

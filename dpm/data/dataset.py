@@ -80,8 +80,11 @@ class DataConfig:
         if self.kind == "points":  # what a points set never read (sets made before them)
             for key in ("kind", "passes", "target_passes"):
                 d.pop(key)
-        else:
+        else:  # what the shards hold depends on the filter's inputs too
+            from dpm.caustic.stats import CHANNELS, TAPS
+
             d["passes"] = list(self.passes)
+            d["format"] = [CHANNELS, TAPS]
             for key in ("budgets", "reference_paths", "reference_radius",
                         "reference_paths_per_pass"):  # fmt: skip
                 d.pop(key)

@@ -18,10 +18,16 @@ later passes of the plan call are compiled (or loaded from Numba's cache) in the
 The plan is made after the first pass, from what it found (deterministic: same seed, same
 plan): no photons where the scene has no mirror or glass, or where the first pass's photons
 add no caustic light to the image; otherwise photon paths per pass in proportion to the
-pixels. The caustic estimator is SPPM, never the network: at equal time the network's cost
-is not repaid (benchmarks/results/dpm.md). SPPM runs at two radii per pixel, and a pixel takes
-the narrower one's estimate where the wider one's blur shows beyond its noise (a sharp
-caustic's peak), else the wider one's: `sharper_where_biased`. The caustic image goes through
+pixels. The caustic estimator is SPPM at two radii per pixel: a pixel takes the narrower
+one's estimate where the wider one's blur shows beyond its noise (a sharp caustic's peak),
+else the wider one's (`sharper_where_biased`), and sparse pixels are spread (`spread_sparse`).
+Where the plan keeps caustics, a learned filter (`dpm.caustic.forward`: a small screen-space
+network that weighs each pixel's neighbours' estimates at both radii and several scales, from
+their photon counts and the guides) then replaces that estimate by one held within CLAMP_Z
+standard errors of it, so the render stays consistent whatever the network says;
+`--no-network` leaves it out, and so does the plan where its predicted time would be over
+NETWORK_SHARE of the budget. The per-point networks (DPM, nppm) are not used: at equal time
+their cost is not repaid (benchmarks/results/dpm.md). The caustic image goes through
 the denoiser (albedo and normal guides) with the path-traced one, and `restore_certain` undoes
 the denoiser wherever it moved a pixel by more than the pixel's standard error (its paths',
 its light seen's and its caustic's, the last 1/√(its photon count) of the larger of its own
@@ -47,6 +53,8 @@ import numpy as np
 from tqdm import tqdm
 
 from dpm.camera import Camera
+from dpm.caustic import forward as caustic_forward
+from dpm.caustic.stats import CausticStats
 from dpm.denoise import denoise, guides, restore_certain
 from dpm.density.base import luminance
 from dpm.density.progressive import pass_seed
@@ -56,8 +64,6 @@ from dpm.estimators.sppm import sppm_gather
 from dpm.filters import box_mean
 from dpm.methods.adaptive import ADAPT_AFTER, EXTRA_CAP, EXTRA_PER_PIXEL, Halves
 from dpm.methods.base import Method, check_photons
-from dpm.nn import caustic_fused
-from dpm.nn.caustic_stats import CausticStats
 from dpm.options import RenderOptions
 from dpm.scene import DIFFUSE, Scene
 from dpm.stopwatch import Stopwatch
@@ -120,17 +126,26 @@ class Plan:
                 "network": self.network, "reason": self.reason}  # fmt: skip
 
 
-def plan_network(plan: Plan, wanted: bool | None, pixels: int, budget: float | None) -> Plan:
-    """The plan with the learned caustic filter (`dpm.nn.caustic_fused`) where it keeps
-    caustics, unless --no-network, or the filter's predicted time is over NETWORK_SHARE of
-    the --time budget (and --network was not given)."""
-    if plan.caustics == "off" or wanted is False:
-        why = "" if plan.caustics == "off" else "; no network (--no-network)"
-        return Plan(plan.caustics, plan.photons_per_pass, plan.reason + why)
+def plan_network(
+    plan: Plan, wanted: bool | None, pixels: int, budget: float | None, shipped: bool = True
+) -> Plan:
+    """The plan with the learned caustic filter (`dpm.caustic.forward`) where it keeps
+    caustics, unless --no-network, the filter's predicted time is over NETWORK_SHARE of the
+    --time budget (and --network was not given), or the default weights are missing
+    (`shipped` False: an install without them renders as --no-network, and says so)."""
+
+    def without(why: str) -> Plan:
+        return Plan(plan.caustics, plan.photons_per_pass, f"{plan.reason}; no network ({why})")
+
+    if plan.caustics == "off":
+        return plan
+    if wanted is False:
+        return without("--no-network")
     cost = NETWORK_SECONDS_PER_PIXEL * pixels
     if wanted is None and budget is not None and cost > NETWORK_SHARE * budget:
-        return Plan(plan.caustics, plan.photons_per_pass, plan.reason + f"; no network (its "
-                    f"{cost:.2f} s would be over {NETWORK_SHARE:.0%} of the budget)")  # fmt: skip
+        return without(f"its {cost:.2f} s would be over {NETWORK_SHARE:.0%} of the budget")
+    if not shipped:
+        return without(f"no weights at {caustic_forward.SHIPPED}")
     return Plan(plan.caustics, plan.photons_per_pass, plan.reason + "; learned caustic filter",
                 network=True)  # fmt: skip
 
@@ -260,7 +275,8 @@ class Auto(Method):
 
     @classmethod
     def check(cls, options: RenderOptions) -> None:
-        """At least one photon path, a positive --time, --radius and --photons-per-pass."""
+        """At least one photon path, a positive --time, --radius and --photons-per-pass, and
+        --weights that are a caustic filter's."""
         check_photons(options)
         if options.time is None and options.photons_per_pass is not None:
             raise InputError("--photons-per-pass applies to auto with --time only (without it,"
@@ -269,6 +285,10 @@ class Auto(Method):
             raise InputError(f"--time must be a positive number of seconds (got {options.time})")
         radius, per_pass = options.radius, options.photons_per_pass
         check_progressive(1.0 if radius is None else radius, per_pass or 1, ALPHA)
+        if options.weights is not None:
+            if options.network is False:
+                raise InputError("--weights are the caustic filter's: no use with --no-network")
+            caustic_forward.load_filter(options.weights)  # a bad file fails before any pass
 
     def render_image(
         self, bvh: BVH, camera: Camera, watch: Stopwatch, started: float
@@ -469,11 +489,18 @@ class Passes:
             path_light = float((self.paths.mean() + self.glow.mean()).mean(axis=1).sum())
         caustic_light = float(self.state.irradiance().mean(axis=1).sum())
         plan = make_plan(self.scene, self.pixels, path_light, caustic_light, self.given, self.why)
-        self.plan = plan_network(plan, self.o.network, self.pixels, self.o.time)
-        if self.plan.network:
+        shipped = self.o.weights is not None or caustic_forward.SHIPPED.exists()
+        self.plan = plan_network(plan, self.o.network, self.pixels, self.o.time, shipped)
+        if self.plan.caustics != "off" and self.o.network is not False:
             with self.watch("network"):
-                self.filter = caustic_fused.load_filter(self.o.weights or caustic_fused.SHIPPED)
-                caustic_fused.warm(self.filter)  # compiled (or loaded) now, not past a budget
+                # compiled (or loaded) now, also where the budget left the filter out: a
+                # longer budget's render must not stop to compile it
+                caustic_forward.warm()
+                if self.plan.network:
+                    self.filter = caustic_forward.load_filter(
+                        self.o.weights or caustic_forward.SHIPPED
+                    )
+                    self.finish_seconds += NETWORK_SECONDS_PER_PIXEL * self.pixels
 
     def done(self) -> bool:
         """Whether to stop: --spp passes done, or the next pass would overrun the budget (a
@@ -557,7 +584,7 @@ class Passes:
         count = np.where(sharp, self.narrow.count, self.state.count)
         if self.filter is not None:
             with self.watch("network"):
-                return caustic_fused.filter_caustics(self.filter, self.caustic_stats()), count
+                return caustic_forward.filter_caustics(self.filter, self.caustic_stats()), count
         radius = np.where(sharp, self.narrow.radius, self.state.radius)
         # each photon falls in the discs of about π (radius in pixel widths)² pixels
         overlap = np.pi * (radius / self.footprint) ** 2

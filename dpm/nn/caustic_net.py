@@ -2,15 +2,15 @@
 kernel over its neighbours' SPPM estimates (kernel prediction, as in learned denoisers), and
 the pure function that applies it.
 
-The network reads `dpm.nn.caustic_stats.features` (scale-free per-pixel statistics and
+The network reads `dpm.caustic.stats.features` (scale-free per-pixel statistics and
 guides) and gives TAPS logits per pixel: one per (candidate estimate, neighbour) of
-`caustic_stats.CANDIDATES`; their softmax weighs those estimates. The result is then held
+`stats.CANDIDATES`; their softmax weighs those estimates. The result is then held
 within CLAMP_Z standard errors of the pixel's own estimate (`clamp`), so whatever the network
 says, as passes add photons the filter's reach shrinks to nothing and the render converges to
 SPPM's. A fresh network's last layer is zero with the pixel's own wide estimate favoured, so
 it starts close to the identity.
 
-Training runs this module under `jax.jit`; a render runs `dpm.nn.caustic_fused`, a Numba
+Training runs this module under `jax.jit`; a render runs `dpm.caustic.forward`, a Numba
 copy of the same forward pass (tested equal), because importing JAX costs a 2-second render
 most of its budget.
 """
@@ -21,7 +21,7 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
-from dpm.nn.caustic_stats import (
+from dpm.caustic.stats import (
     CHANNELS,
     CLAMP_Z,
     DILATIONS,
@@ -31,7 +31,7 @@ from dpm.nn.caustic_stats import (
     tap_offsets,
 )  # fmt: skip
 
-CENTRE_LOGIT = 6.0  # a fresh network's logit for the pixel's own wide estimate (weight 0.85)
+CENTRE_LOGIT = 6.0  # a fresh network's logit for the pixel's own wide estimate (weight 0.8)
 
 
 def _centre_bias(key: jax.Array, shape: tuple[int, ...], dtype: jnp.dtype = jnp.float32):
@@ -80,21 +80,16 @@ def apply_kernel(logits: jnp.ndarray, candidates: jnp.ndarray) -> jnp.ndarray:
     return jnp.einsum("hwt,hwtc->hwc", weights, taps)
 
 
-def luminance(rgb: jnp.ndarray) -> jnp.ndarray:
-    """(...) Rec. 709 luminance of (..., 3) linear RGB (as dpm.density.base.luminance)."""
-    return rgb @ jnp.array([0.2126, 0.7152, 0.0722], rgb.dtype)
-
-
 def clamp(filtered: jnp.ndarray, own: jnp.ndarray, count: jnp.ndarray, photon: jnp.ndarray):
-    """(..., 3) `filtered` held within CLAMP_Z standard errors of `own` (..., 3) (as
-    `caustic_stats.clamp_to_own`; count (...): photons behind own, photon: one photon's
-    luminance)."""
-    lo, lf = luminance(own), luminance(filtered)
-    error = jnp.where(count > 0, jnp.maximum(lo, lf) / jnp.sqrt(jnp.maximum(count, 1.0)),
-                      jnp.minimum(lf, photon))  # fmt: skip
-    reach = CLAMP_Z * error + TINY
-    keep = reach / jnp.maximum(jnp.abs(lf - lo) + TINY, reach)  # 1 within reach (no where:
-    return own + keep[..., None] * (filtered - own)  # its untaken branch's gradient is NaN)
+    """(..., 3) `filtered` moved back toward `own` (..., 3) until every channel is within
+    CLAMP_Z standard errors of it (as `dpm.caustic.stats.clamp_to_own`; count (...): photons
+    behind own, photon: one photon's luminance)."""
+    error = jnp.where(count[..., None] > 0,
+                      jnp.maximum(own, filtered) / jnp.sqrt(jnp.maximum(count, 1.0))[..., None],
+                      jnp.minimum(filtered, photon))  # fmt: skip
+    allowed = CLAMP_Z * error + TINY  # the share below is 1 within reach (no `where`: its
+    keep = (allowed / jnp.maximum(jnp.abs(filtered - own) + TINY, allowed)).min(axis=-1)
+    return (1 - keep[..., None]) * own + keep[..., None] * filtered  # gradient is NaN)
 
 
 def filter_caustics(

@@ -18,9 +18,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from dpm.caustic.stats import SPREAD
 from dpm.data.caustic_set import load_caustic_shard
 from dpm.nn.caustic_net import filter_caustics
-from dpm.nn.caustic_stats import SPREAD
 from dpm.nn.config import Config
 
 

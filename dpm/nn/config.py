@@ -115,8 +115,15 @@ def load_config(path: str | Path) -> Config:
     if (d.kind == "caustic") != (m.architecture == "caustic"):
         raise InputError(f"{path}: the caustic architecture trains on [data] kind = 'caustic', "
                          "and only it does")  # fmt: skip
-    if not d.passes or min(d.passes) < 1 or d.target_passes <= max(d.passes):
-        raise InputError(f"{path}: [data] passes must be positive and below target_passes")
+    ladder = list(d.passes)
+    if (
+        not ladder
+        or min(ladder) < 1
+        or d.target_passes <= max(ladder)
+        or ladder != sorted(set(ladder))
+    ):
+        raise InputError(f"{path}: [data] passes must be positive, increasing and below "
+                         "target_passes")  # fmt: skip
     if not d.budgets or min(d.budgets) < 1 or not t.learning_rate > 0:
         raise InputError(f"{path}: [data] budgets and [train] learning_rate must be positive")
     for key in ("reference_paths", "reference_paths_per_pass"):

@@ -2,7 +2,7 @@
 the view-relative features made from them, and the candidate estimates its kernel weighs.
 
 NumPy only (no JAX), so a render can form them without importing JAX; the network that reads
-them is `dpm.nn.caustic_net` (training, pure JAX) and `dpm.nn.caustic_fused` (the render's
+them is `dpm.nn.caustic_net` (training, pure JAX) and `dpm.caustic.forward` (the render's
 Numba copy of its forward pass). Every feature is scale-free: radiance over the image's mean
 caustic, radii in pixel footprints, depth relative to the median pixel's, so a scene's size
 and brightness do not matter.
@@ -100,14 +100,21 @@ def centre_tap() -> int:
 
 
 def clamp_to_own(s: CausticStats, filtered: np.ndarray) -> np.ndarray:
-    """(P, 3) float64: `filtered` (P, 3) moved back toward the pixel's own estimate until its
-    luminance lies within CLAMP_Z standard errors of it (1/√photons of the larger of the two,
-    or one photon's value where the disc holds none), so as passes add photons the result
-    converges to the own (consistent) estimate whatever the network says."""
-    own, lo, lf = s.own, luminance(s.own), luminance(filtered)
-    count = s.own_count
-    error = np.where(count > 0, np.maximum(lo, lf) / np.sqrt(np.maximum(count, 1)),
-                     np.minimum(lf, s.photon_value()))  # fmt: skip
-    reach = CLAMP_Z * error + TINY
-    keep = reach / np.maximum(np.abs(lf - lo) + TINY, reach)
-    return own + keep[:, None] * (filtered - own)
+    """(P, 3) float64: `filtered` (P, 3) moved back toward the pixel's own estimate until
+    every channel lies within CLAMP_Z standard errors of the own one's (`reach`), so as passes
+    add photons the result converges to the own (consistent) estimate whatever the network
+    says, colour included."""
+    keep = reach(s.own, filtered, s.own_count, s.photon_value())
+    return (1 - keep[:, None]) * s.own + keep[:, None] * filtered  # a sum of non-negatives
+
+
+def reach(own: np.ndarray, filtered: np.ndarray, count: np.ndarray, photon: float) -> np.ndarray:
+    """(P,) the share of the move from own (P, 3) to filtered (P, 3) that keeps each channel
+    within CLAMP_Z standard errors: 1/√count of the larger of the two values where the disc
+    holds `count` (P,) photons, else the smaller of the filtered value and one photon's
+    luminance `photon` (both shrink as passes add photons and paths)."""
+    error = np.where(count[:, None] > 0,
+                     np.maximum(own, filtered) / np.sqrt(np.maximum(count, 1))[:, None],
+                     np.minimum(filtered, photon))  # fmt: skip
+    allowed = CLAMP_Z * error + TINY
+    return (allowed / np.maximum(np.abs(filtered - own) + TINY, allowed)).min(axis=1)

@@ -18,8 +18,8 @@ import msgpack
 import numba as nb
 import numpy as np
 
-from dpm.errors import InputError
-from dpm.nn.caustic_stats import (
+from dpm.caustic.stats import (
+    CANDIDATES,
     CHANNELS,
     DILATIONS,
     TAPS,
@@ -29,8 +29,10 @@ from dpm.nn.caustic_stats import (
     features,
     tap_offsets,
 )  # fmt: skip
+from dpm.errors import InputError
 
-SHIPPED = Path(__file__).parent / "weights" / "caustic.msgpack"
+# made by `dpm-train --config configs/caustic.toml` (docs/training.md)
+SHIPPED = Path(__file__).parent.parent / "nn" / "weights" / "caustic.msgpack"
 ARCHITECTURE = "caustic"
 LAYERS = len(DILATIONS)  # 3 × 3 layers before the 1 × 1 output layer
 
@@ -63,26 +65,31 @@ def load_filter(path: str | Path = SHIPPED) -> FilterWeights:
         if data["architecture"] != ARCHITECTURE:
             raise InputError(f"{path}: a {data['architecture']} network, not the caustic filter")
         p = data["params"]["params"]
-        kernels = tuple(np.asarray(p[f"Conv_{i}"]["kernel"], np.float32) for i in range(LAYERS))
-        biases = tuple(np.asarray(p[f"Conv_{i}"]["bias"], np.float32) for i in range(LAYERS))
-        weights = FilterWeights(kernels, biases, np.asarray(p[f"Conv_{LAYERS}"]["kernel"],
-                                np.float32)[0, 0], np.asarray(p[f"Conv_{LAYERS}"]["bias"],
-                                np.float32))  # fmt: skip
+        layers = [
+            (np.asarray(p[f"Conv_{i}"]["kernel"], np.float32),
+             np.asarray(p[f"Conv_{i}"]["bias"], np.float32))
+            for i in range(LAYERS + 1)
+        ]  # fmt: skip
+        names = set(p)
     except FileNotFoundError:
         raise InputError(f"{path}: weight file not found") from None
     except InputError:
         raise
     except Exception as e:  # msgpack, key and shape errors alike: not a weight file
         raise InputError(f"{path}: not a dpm weight file ({type(e).__name__})") from None
-    width = weights.out_kernel.shape[0]
-    ins = (CHANNELS,) + (width,) * (LAYERS - 1)
-    fits = all(k.shape == (3, 3, i, width) and b.shape == (width,)
-               for k, b, i in zip(weights.kernels, weights.biases, ins, strict=True))  # fmt: skip
-    if not fits or weights.out_kernel.shape != (width, TAPS) or weights.out_bias.shape != (TAPS,):
+    width = layers[0][0].shape[-1] if layers[0][0].ndim == 4 else -1
+    shapes = [((3, 3, n, width), (width,)) for n in (CHANNELS,) + (width,) * (LAYERS - 1)]
+    shapes.append(((1, 1, width, TAPS), (TAPS,)))
+    fits = names == {f"Conv_{i}" for i in range(LAYERS + 1)} and all(
+        (k.shape, b.shape) == shape for (k, b), shape in zip(layers, shapes, strict=True)
+    )
+    if not fits:
         raise InputError(f"{path}: parameters do not fit the caustic filter")
-    if not all(np.isfinite(a).all() for a in (*weights.kernels, weights.out_kernel)):
+    if not all(np.isfinite(a).all() for layer in layers for a in layer):
         raise InputError(f"{path}: the caustic filter's parameters are not finite")
-    return weights
+    (*hidden, (out_kernel, out_bias)) = layers
+    return FilterWeights(tuple(k for k, _ in hidden), tuple(b for _, b in hidden),
+                         out_kernel[0, 0], out_bias)  # fmt: skip
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
@@ -158,16 +165,26 @@ def kernel_output(weights: FilterWeights, feats: np.ndarray, cands: np.ndarray) 
         x = _conv_relu(x, kernel, bias, d)
     offsets = tap_offsets().astype(np.int64)
     cands = np.ascontiguousarray(cands, np.float32)
+    assert cands.shape[0] == len(CANDIDATES), cands.shape
     return _weigh(x, weights.out_kernel, weights.out_bias, cands, offsets)
 
 
-def warm(weights: FilterWeights) -> None:
-    """Compile (or load from Numba's cache) the kernels on a one-pixel image."""
-    kernel_output(weights, np.zeros((1, 1, CHANNELS), np.float32), np.zeros((3, 1, 1, 3)))
+def warm() -> None:
+    """Compile (or load from Numba's cache) the kernels, on a one-pixel image and weights of
+    the right types (no file read)."""
+    w = 1
+    kernels = tuple(np.zeros((3, 3, n, w), np.float32) for n in (CHANNELS,) + (w,) * (LAYERS - 1))
+    biases = tuple(np.zeros(w, np.float32) for _ in range(LAYERS))
+    weights = FilterWeights(kernels, biases, np.zeros((w, TAPS), np.float32),
+                            np.zeros(TAPS, np.float32))  # fmt: skip
+    cands = np.zeros((len(CANDIDATES), 1, 1, 3), np.float32)
+    kernel_output(weights, np.zeros((1, 1, CHANNELS), np.float32), cands)
 
 
 def filter_caustics(weights: FilterWeights, stats: CausticStats) -> np.ndarray:
     """(P, 3) float64 caustic radiance per pixel: the network's kernel over the candidate
-    estimates, held within CLAMP_Z standard errors of the pixel's own (`clamp_to_own`)."""
-    filtered = kernel_output(weights, features(stats), candidates(stats))
-    return clamp_to_own(stats, filtered.reshape(-1, 3))
+    estimates, held within CLAMP_Z standard errors of the pixel's own (`clamp_to_own`); the
+    pixel's own where the network's output is not finite (weights that overflow)."""
+    filtered = kernel_output(weights, features(stats), candidates(stats)).reshape(-1, 3)
+    filtered = np.where(np.isfinite(filtered).all(axis=1, keepdims=True), filtered, stats.own)
+    return clamp_to_own(stats, filtered)
