@@ -84,7 +84,8 @@ def candidates(s: CausticStats) -> np.ndarray:
         inside = box_mean(np.ones((s.h, s.w)), size)
         means.append(box_mean(wide, (size, size, 1)) / inside[..., None])
     narrow, spread = (a.reshape(s.h, s.w, 3) for a in (s.narrow, s.spread))
-    return np.stack([wide, narrow, *means, spread]).astype(np.float32)
+    # running box sums leave -1e-17 where the image is dark: radiance is never negative
+    return np.maximum(np.stack([wide, narrow, *means, spread]), 0.0).astype(np.float32)
 
 
 def tap_offsets() -> np.ndarray:
