@@ -80,6 +80,7 @@ class DataConfig:
         if self.kind == "points":  # what a points set never read (sets made before them)
             for key in ("kind", "passes", "target_passes"):
                 d.pop(key)
+            d["budgets"] = list(self.budgets)
         else:  # what the shards hold depends on the filter's inputs too
             from dpm.caustic.stats import CHANNELS, TAPS
 
@@ -88,7 +89,6 @@ class DataConfig:
             for key in ("budgets", "reference_paths", "reference_radius",
                         "reference_paths_per_pass"):  # fmt: skip
                 d.pop(key)
-        d["budgets"] = list(self.budgets)
         d["generator"] = GENERATOR
         return d
 
