@@ -16,7 +16,9 @@ passes; a uniformly scaled copy is scored against its scale-1 twin's, as
 
 RMSE (`dpm.metrics.rmse`) against the reference, the mean over `--seeds`; ratio = with the
 network / without. The reference's own noise (its halves' RMSE / 2) is recorded beside it.
-Writes results/caustic_network/SET.json and results/caustic_network.md.
+Writes results/caustic_network/unseen.json, results/caustic_network.md and
+results/caustic_network/rmse_vs_time.png (per scene, caustic RMSE against whole-process
+seconds, with and without the network).
 """
 
 from __future__ import annotations
@@ -126,14 +128,14 @@ def report(record: dict) -> str:
         "# `auto`'s learned caustic filter against `auto --no-network` (caustic component)",
         "",
         "Made by `python benchmarks/caustic_network.py` (see its docstring) on "
-        f"{record['cpu']}, {record['date']}, seeds {record['seeds']}. RMSE against the SPPM",
+        f"{record['cpu']}, {record['date']}. RMSE against the SPPM",
         "caustic references of `benchmarks/caustic_references.py`; ratio = with / without the",
         "network (below 1: the network wins). Unseen scenes: no constant or weight was chosen",
         "on them.",
         "",
     ]
     if record["passes"]:
-        lines += ["## Equal passes (same samples)", ""]
+        lines += [f"## Equal passes (same samples; seeds {record.get('passes_seeds')})", ""]
         head = ["scene", "passes", "network", "no network", "ratio", "reference noise"]
         rows = [[x["scene"], str(x["passes"]), f"{x['network']:.5f}", f"{x['plain']:.5f}",
                  f"{x['network'] / x['plain']:.3f}", f"{x['reference_noise']:.5f}"]
@@ -145,7 +147,7 @@ def report(record: dict) -> str:
                          f"{min(q):.3f}-{max(q):.3f} over {len(q)} scenes")  # fmt: skip
         lines.append("")
     if record["times"]:
-        lines += ["## Equal whole-process time", ""]
+        lines += [f"## Equal whole-process time (seeds {record.get('times_seeds')})", ""]
         head = ["scene", "budget s", "network", "passes", "share", "no network", "passes",
                 "ratio"]  # fmt: skip
         rows = [[x["scene"], f"{x['budget']:g}", f"{x['network']:.5f}",
@@ -169,6 +171,34 @@ def report(record: dict) -> str:
     return "\n".join(lines)
 
 
+def chart(record: dict, path: Path) -> None:
+    """Per scene, caustic RMSE against whole-process seconds, with and without the network."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(dict.fromkeys(x["scene"] for x in record["times"]))
+    cols = 4
+    rows = -(-len(names) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.6 * rows), squeeze=False)
+    for ax, name in zip(axes.flat, names, strict=False):
+        xs = [x for x in record["times"] if x["scene"] == name]
+        for key, label in (("network", "auto"), ("plain", "auto --no-network")):
+            ax.loglog([x[f"{key}_s"] for x in xs], [x[key] for x in xs], "o-", label=label)
+        ax.axhline(xs[0]["reference_noise"], color="grey", lw=0.8, ls=":")
+        ax.set_title(name, fontsize=9)
+        ax.tick_params(labelsize=7)
+    for ax in list(axes.flat)[len(names) :]:
+        ax.axis("off")
+    axes[0, 0].legend(fontsize=7)
+    fig.supxlabel("whole-process seconds")
+    fig.supylabel("caustic RMSE (dotted: the reference's noise)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def main() -> None:
     """Run the comparisons and write the record and the table."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -178,15 +208,24 @@ def main() -> None:
     p.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
     a = p.parse_args()
     names = a.scenes or [n for n in UNSEEN if n not in CONTROLS]
+    saved = OUT / "unseen.json"
+    old = json.loads(saved.read_text()) if saved.exists() else {"passes": [], "times": []}
     record = {"cpu": cpu(), "date": str(datetime.date.today()), "seeds": a.seeds,
               "passes": [], "times": []}  # fmt: skip
-    for name in names:
-        record["passes"] += equal_passes(name, a.passes, a.seeds) if a.passes else []
-    for name in names:
-        record["times"] += equal_time(name, a.times, a.seeds) if a.times else []
+    for part, run in (("passes", equal_passes), ("times", equal_time)):
+        values = getattr(a, part)
+        if not values:  # not rerun: the saved rows stay
+            record[part] = old[part]
+            record[f"{part}_seeds"] = old.get(f"{part}_seeds", old.get("seeds"))
+            continue
+        record[f"{part}_seeds"] = a.seeds
+        for name in names:
+            record[part] += run(name, values, a.seeds)
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "unseen.json").write_text(json.dumps(record, indent=1))
     TABLE.write_text(report(record))
+    if record["times"]:
+        chart(record, OUT / "rmse_vs_time.png")
     print(report(record))
 
 

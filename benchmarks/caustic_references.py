@@ -1,6 +1,6 @@
 """Per-pixel caustic references of the unseen scenes, for `auto`'s caustic component.
 
-    python benchmarks/caustic_references.py [--passes 512] [--scenes NAME ...]
+    python benchmarks/caustic_references.py [--passes 512] [--scenes NAME ...] [--set examples]
 
 `auto --component caustic` averages, per pixel, SPPM's estimates at one jittered visible
 point per pass, so its limit is the caustic radiance the camera sees averaged over the
@@ -33,32 +33,44 @@ from dpm.options import RenderOptions
 from dpm.renderer import render
 
 HERE = Path(__file__).parent
-SCENES = HERE / "scenes" / "unseen"
-OUT = HERE / "results" / "unseen"
+SETS = {  # where each set's scenes lie, and their references (the examples: to choose on)
+    "unseen": (HERE / "scenes" / "unseen", HERE / "results" / "unseen"),
+    "examples": (HERE.parent / "examples" / "scenes", HERE / "results" / "caustic_examples"),
+}
+EXAMPLES = ("dragon", "glass_egg", "pool1", "pool2", "red_wine", "ring", "torus")
+EXAMPLE_WIDTH = 128  # as the equal-time references of the examples
 CONTROLS = ("control_room", "control_huge")  # no mirror or glass: no caustics
 SCALED = ("spheres_s0p01", "spheres_s100")  # copies of spheres_s1, scored against its reference
 MAX_WIDTH = 256
 SEEDS = (1001, 1002)
 
 
-def reference_file(name: str, width: int, height: int) -> Path:
+def reference_file(name: str, width: int, height: int, which: str = "unseen") -> Path:
     """Where scene `name`'s caustic reference at width × height lies."""
-    return OUT / f"{name}-{width}x{height}-caustic.npz"
+    return SETS[which][1] / f"{name}-{width}x{height}-caustic.npz"
 
 
-def load_reference(name: str, width: int, height: int) -> tuple[np.ndarray, float, int]:
+def load_reference(
+    name: str, width: int, height: int, which: str = "unseen"
+) -> tuple[np.ndarray, float, int]:
     """(H, W, 3) float32 caustic reference (the halves' mean), its noise (RMSE) and passes."""
-    with np.load(reference_file(name, width, height)) as f:
+    with np.load(reference_file(name, width, height, which)) as f:
         return f["halves"].mean(axis=0), float(f["noise"]), int(f["passes"])
 
 
-def make(name: str, passes: int) -> None:
+def size(name: str, which: str = "unseen") -> tuple[Path, int, int]:
+    """(OBJ path, W, H) of scene `name` of a set at its reference's size."""
+    path = SETS[which][0] / f"{name}.obj"
+    c = load_scene(path).camera
+    width = min(c.width, MAX_WIDTH if which == "unseen" else EXAMPLE_WIDTH)
+    return path, width, max(1, width * c.height // c.width)
+
+
+def make(name: str, passes: int, which: str = "unseen") -> None:
     """Render scene `name`'s two halves at `passes` passes and save them."""
-    scene = load_scene(SCENES / f"{name}.obj")
-    c = scene.camera
-    width = min(c.width, MAX_WIDTH)
-    height = max(1, width * c.height // c.width)
-    path = reference_file(name, width, height)
+    obj, width, height = size(name, which)
+    scene = load_scene(obj)
+    path = reference_file(name, width, height, which)
     if path.exists():
         with np.load(path) as f:
             if int(f["passes"]) >= passes:
@@ -81,14 +93,19 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--passes", type=int, default=512)
     p.add_argument("--scenes", nargs="*")
+    p.add_argument("--set", choices=sorted(SETS), default="unseen")
     a = p.parse_args()
-    names = a.scenes or sorted(
-        q.stem for q in SCENES.glob("*.obj") if q.stem not in CONTROLS + SCALED
-    )
+    folder = SETS[a.set][0]
+    if a.set == "examples":
+        names = a.scenes or list(EXAMPLES)
+    else:
+        names = a.scenes or sorted(
+            q.stem for q in folder.glob("*.obj") if q.stem not in CONTROLS + SCALED
+        )
     if not names:
-        sys.exit(f"no scenes in {SCENES}: run benchmarks/scenes/make_unseen.py first")
+        sys.exit(f"no scenes in {folder}: run benchmarks/scenes/make_unseen.py first")
     for name in names:
-        make(name, a.passes)
+        make(name, a.passes, a.set)
 
 
 if __name__ == "__main__":

@@ -5,7 +5,7 @@ the pure function that applies it.
 The network reads `dpm.caustic.stats.features` (scale-free per-pixel statistics and
 guides) and gives TAPS logits per pixel: one per (candidate estimate, neighbour) of
 `stats.CANDIDATES`; their softmax weighs those estimates. The result is then held
-within CLAMP_Z standard errors of the pixel's own estimate (`clamp`), so whatever the network
+within a few standard errors of the pixel's own estimate (`clamp`), so whatever the network
 says, as passes add photons the filter's reach shrinks to nothing and the render converges to
 SPPM's. A fresh network's last layer is zero with the pixel's own wide estimate favoured, so
 it starts close to the identity.
@@ -23,10 +23,10 @@ import jax.numpy as jnp
 
 from dpm.caustic.stats import (
     CHANNELS,
-    CLAMP_Z,
     DILATIONS,
     TAPS,
     TINY,
+    TRAIN_CLAMP_Z,
     centre_tap,
     tap_offsets,
 )  # fmt: skip
@@ -80,24 +80,27 @@ def apply_kernel(logits: jnp.ndarray, candidates: jnp.ndarray) -> jnp.ndarray:
     return jnp.einsum("hwt,hwtc->hwc", weights, taps)
 
 
-def clamp(filtered: jnp.ndarray, own: jnp.ndarray, count: jnp.ndarray, photon: jnp.ndarray):
-    """(..., 3) `filtered` moved back toward `own` (..., 3) until every channel is within
-    CLAMP_Z standard errors of it (as `dpm.caustic.stats.clamp_to_own`; count (...): photons
-    behind own, photon: one photon's luminance)."""
+def clamp(
+    filtered: jnp.ndarray, own: jnp.ndarray, count: jnp.ndarray, photon: jnp.ndarray,
+    z: float = TRAIN_CLAMP_Z,
+) -> jnp.ndarray:  # fmt: skip
+    """(..., 3) `filtered` moved back toward `own` (..., 3) until every channel is within z
+    standard errors of it (as `dpm.caustic.stats.clamp_to_own`; count (...): photons behind
+    own, photon: one photon's luminance)."""
     error = jnp.where(count[..., None] > 0,
                       jnp.maximum(own, filtered) / jnp.sqrt(jnp.maximum(count, 1.0))[..., None],
                       jnp.minimum(filtered, photon))  # fmt: skip
-    allowed = CLAMP_Z * error + TINY  # the share below is 1 within reach (no `where`: its
+    allowed = z * error + TINY  # the share below is 1 within reach (no `where`: its
     keep = (allowed / jnp.maximum(jnp.abs(filtered - own) + TINY, allowed)).min(axis=-1)
     return (1 - keep[..., None]) * own + keep[..., None] * filtered  # gradient is NaN)
 
 
 def filter_caustics(
     model: nn.Module, params: dict, features: jnp.ndarray, candidates: jnp.ndarray,
-    own: jnp.ndarray, count: jnp.ndarray, photon: jnp.ndarray,
+    own: jnp.ndarray, count: jnp.ndarray, photon: jnp.ndarray, z: float = TRAIN_CLAMP_Z,
 ) -> jnp.ndarray:  # fmt: skip
     """(H, W, 3) filtered caustic radiance of one image: features (H, W, CHANNELS), candidates
     (C, H, W, 3), own (H, W, 3) and count (H, W) the pixel's own estimate and its photons,
     photon () one photon's luminance. Pure: jit and vmap it."""
     logits = model.apply(params, features)
-    return clamp(apply_kernel(logits, candidates), own, count, photon)
+    return clamp(apply_kernel(logits, candidates), own, count, photon, z)
