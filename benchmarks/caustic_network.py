@@ -201,6 +201,8 @@ def chart(record: dict, path: Path) -> None:
             ax.loglog([x[f"{key}_s"] for x in xs], [x[key] for x in xs], "o-", label=label)
         ax.axhline(xs[0]["reference_noise"], color="grey", lw=0.8, ls=":")
         ax.set_title(name, fontsize=9)
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        ax.set_xticks([2, 4, 8, 16], ["2", "4", "8", "16"])
         ax.tick_params(labelsize=7)
     for ax in list(axes.flat)[len(names) :]:
         ax.axis("off")
