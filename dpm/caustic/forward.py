@@ -65,9 +65,11 @@ def load_filter(path: str | Path = SHIPPED) -> FilterWeights:
         if data["architecture"] != ARCHITECTURE:
             raise InputError(f"{path}: a {data['architecture']} network, not the caustic filter")
         p = data["params"]["params"]
+        # copies: the buffers msgpack gives are read-only, which Numba types apart from the
+        # writable arrays `warm` compiles for (a second compile at the first real call)
         layers = [
-            (np.asarray(p[f"Conv_{i}"]["kernel"], np.float32),
-             np.asarray(p[f"Conv_{i}"]["bias"], np.float32))
+            (np.array(p[f"Conv_{i}"]["kernel"], np.float32),
+             np.array(p[f"Conv_{i}"]["bias"], np.float32))
             for i in range(LAYERS + 1)
         ]  # fmt: skip
         names = set(p)
@@ -89,7 +91,7 @@ def load_filter(path: str | Path = SHIPPED) -> FilterWeights:
         raise InputError(f"{path}: the caustic filter's parameters are not finite")
     (*hidden, (out_kernel, out_bias)) = layers
     return FilterWeights(tuple(k for k, _ in hidden), tuple(b for _, b in hidden),
-                         out_kernel[0, 0], out_bias)  # fmt: skip
+                         np.ascontiguousarray(out_kernel[0, 0]), out_bias)  # fmt: skip
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")

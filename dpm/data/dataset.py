@@ -214,12 +214,9 @@ def build(
 ) -> dict:
     """Make every missing shard of the set (resuming a killed build), as Ray tasks or, with
     `workers` = 1 and no `ray_address`, in this process; returns the manifest. `make` makes
-    one scene (default: `make_shard`, or `caustic_set.make_caustic_shard` for a caustic
-    set; tests put faults in it)."""
-    if make is None:
-        from dpm.data.caustic_set import make_caustic_shard
-
-        make = make_caustic_shard if config.kind == "caustic" else make_shard
+    one scene (default: `make_shard`; `caustic_set.make_caustic_shard` for a caustic set;
+    tests put faults in it)."""
+    make = make or make_shard
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
     manifest = read_manifest(out) or {"config": config.identity(), "shards": []}

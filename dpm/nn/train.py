@@ -25,6 +25,7 @@ import numpy as np
 import optax
 from tqdm import tqdm
 
+from dpm.data.caustic_set import make_caustic_shard
 from dpm.data.dataset import build
 from dpm.nn.caustic_training import CausticSampler, caustic_estimates
 from dpm.nn.config import Config
@@ -86,7 +87,8 @@ def train(config: Config, progress: bool = True) -> tuple[dict, list[dict]]:
     devices = DataParallel()
     devices.check("[train] batch", t.batch)
     devices.check("[train] validation_points", t.validation_points)
-    manifest = build(config.data, progress=progress)
+    make = make_caustic_shard if config.data.kind == "caustic" else None
+    manifest = build(config.data, progress=progress, make=make)
     n = len(manifest["shards"])
     nppm = m.architecture == "nppm"  # the shape network: its own samples and loss
     caustic = m.architecture == "caustic"  # auto's caustic filter: whole images
