@@ -12,15 +12,11 @@ generator of its own), at `width`² pixels.
 
 from __future__ import annotations
 
-import tempfile
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-
-from dpm.data.builder import write_scene
-from dpm.data.procedural import random_scene
 
 if TYPE_CHECKING:
     from dpm.caustic.stats import CausticStats
@@ -60,19 +56,12 @@ def make_caustic_shard(config: DataConfig, index: int, threads: int | None = Non
     import numba
 
     from dpm.caustic.stats import candidates, features
-    from dpm.data.dataset import npz_bytes, shard_name
-    from dpm.scene import load_scene
+    from dpm.data.dataset import npz_bytes, scene_files, shard_name
     from dpm.tracer import build_bvh
 
     numba.set_num_threads(threads or numba.config.NUMBA_NUM_THREADS)
     start = time.perf_counter()
-    files = {}
-    with tempfile.TemporaryDirectory() as tmp:
-        comment = f"dpm caustic-filter training scene {index} (seed {config.seed}), by dpm.data"
-        obj = write_scene(random_scene(index, config.seed, config.width), Path(tmp), comment)
-        for path in sorted(Path(tmp).iterdir()):
-            files[f"scenes/{path.name}"] = path.read_bytes()
-        scene = load_scene(obj)
+    scene, files = scene_files(config, index, "dpm caustic-filter training scene")
     bvh = build_bvh(scene)
     base = (config.seed * 7919 + index) * 4
     ladder = tuple(sorted(config.passes))

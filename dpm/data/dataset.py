@@ -127,24 +127,31 @@ def npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
     return buf.getvalue()
 
 
+def scene_files(config: DataConfig, index: int, what: str) -> tuple:
+    """Procedural scene `index` of the set, loaded, and its OBJ, MTL and TOML files
+    ({'scenes/NAME': bytes}), headed by a comment naming `what` it is."""
+    from dpm.scene import load_scene
+
+    files = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        comment = f"{what} {index} (seed {config.seed}), by dpm.data"
+        obj = write_scene(random_scene(index, config.seed, config.width), Path(tmp), comment)
+        for path in sorted(Path(tmp).iterdir()):
+            files[f"scenes/{path.name}"] = path.read_bytes()
+        return load_scene(obj), files
+
+
 def make_shard(config: DataConfig, index: int, threads: int | None = None) -> tuple[dict, dict]:
     """Make scene `index` and its shard on `threads` Numba threads (default: all); returns its
     manifest entry and its files, {path relative to `out`: bytes}, written by the caller."""
     import numba
 
     from dpm.estimators.reference import ppm_reference
-    from dpm.scene import load_scene
     from dpm.tracer import build_bvh, trace_photons, trace_visible_points
 
     numba.set_num_threads(threads or numba.config.NUMBA_NUM_THREADS)
     start = time.perf_counter()
-    files = {}
-    with tempfile.TemporaryDirectory() as tmp:
-        comment = f"dpm training scene {index} (seed {config.seed}), by dpm.data"
-        obj = write_scene(random_scene(index, config.seed, config.width), Path(tmp), comment)
-        for path in sorted(Path(tmp).iterdir()):
-            files[f"scenes/{path.name}"] = path.read_bytes()
-        scene = load_scene(obj)
+    scene, files = scene_files(config, index, "dpm training scene")
     bvh = build_bvh(scene)
     camera = scene.camera
     points = trace_visible_points(scene, bvh, camera, 1, config.seed, (0, camera.height))

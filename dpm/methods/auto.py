@@ -560,11 +560,13 @@ class Passes:
         shape = (self.h, self.w, 3)
         return (self.albedo / self.j).reshape(shape), (self.normal / self.j).reshape(shape)
 
-    def caustic_stats(self) -> CausticStats:
-        """The passes' per-pixel caustic statistics, as the learned filter reads them."""
+    def caustic_stats(self, chosen: tuple | None = None) -> CausticStats:
+        """The passes' per-pixel caustic statistics, as the learned filter reads them (chosen:
+        `sharper_where_biased`'s result, when already made)."""
         s, n, fp = self.state, self.narrow, self.footprint
-        own, sharp = sharper_where_biased(s, n, LEPSKI_Z)
+        own, sharp = chosen or sharper_where_biased(s, n, LEPSKI_Z)
         count = np.where(sharp, n.count, s.count)
+        # each photon falls in the discs of about π (radius in pixel widths)² pixels
         overlap = np.pi * (np.where(sharp, n.radius, s.radius) / fp) ** 2
         return CausticStats(
             self.h, self.w, self.j, s.irradiance(), n.irradiance(), s.count, n.count, own,
@@ -581,12 +583,8 @@ class Passes:
         self.method.sharp_pixels = int(sharp.sum())
         if self.footprint is None:  # no caustics were estimated
             return caustic, np.zeros(self.pixels)
-        count = np.where(sharp, self.narrow.count, self.state.count)
+        stats = self.caustic_stats((caustic, sharp))
         if self.filter is not None:
             with self.watch("network"):
-                return caustic_forward.filter_caustics(self.filter, self.caustic_stats()), count
-        radius = np.where(sharp, self.narrow.radius, self.state.radius)
-        # each photon falls in the discs of about π (radius in pixel widths)² pixels
-        overlap = np.pi * (radius / self.footprint) ** 2
-        caustic = spread_sparse(caustic, count, overlap, self.h, self.w)
-        return caustic, count
+                return caustic_forward.filter_caustics(self.filter, stats), stats.own_count
+        return stats.spread, stats.own_count
