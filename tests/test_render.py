@@ -15,6 +15,7 @@ from dpm.cli import render_main
 from dpm.denoise import guides
 from dpm.density.base import luminance
 from dpm.estimators import PM
+from dpm.estimators.sppm import default_paths_per_pass
 from dpm.io import read_exr
 from dpm.renderer import RenderOptions, render
 from dpm.tracer import (
@@ -153,3 +154,18 @@ def test_cli_writes_exr_and_png_by_default(scene_path: Path, monkeypatch, capsys
     assert linear.shape == png.shape == (8, 12, 3)
     assert render_main([*argv, "-o", "b.png", "-o", "b.exr", "--quiet"]) == 0
     np.testing.assert_array_equal(read_exr("b.exr"), linear)  # same seed, same image
+
+
+def test_sppm_passes_follow_the_pixel_count(scene_path: Path) -> None:
+    # Each sppm pass is also one camera sample per pixel, so its default paths per pass come
+    # from the pixel count, not from the photon budget; --photons-per-pass still rules.
+    scene = load_scene(scene_path)
+    for width, height in ((8, 8), (16, 8)):
+        opts = RenderOptions(method="sppm", spp=1, width=width, height=height, photons=5000,
+                             component="caustic", progress=False, denoise=False)  # fmt: skip
+        stats = render(scene, opts).stats
+        assert stats["photons_per_pass"] == default_paths_per_pass(5000, width * height)
+    assert default_paths_per_pass(5000, 10**6) == 5000  # never more than the run
+    assert default_paths_per_pass(5000, 0) == 1
+    opts.photons_per_pass = 700
+    assert render(scene, opts).stats["photons_per_pass"] == 700

@@ -15,14 +15,7 @@ import pytest
 from test_truths import glass_radiance, glass_scene, pixel_truth
 
 from dpm import load_scene
-from dpm.density.radius import (
-    CANDIDATES,
-    FALLBACK,
-    NEAREST,
-    SHRINK,
-    initial_radii,
-    pilot_footprints,
-)
+from dpm.density.radius import FOOTPRINTS, NEAREST, SHAPE, initial_radii
 from dpm.methods import METHODS, method_class
 from dpm.renderer import RenderOptions, render
 from dpm.tracer import PhotonMap
@@ -80,58 +73,26 @@ def test_far_geometry_changes_no_error(scenes: tuple, method: str) -> None:
     assert errors[1] == pytest.approx(errors[0], rel=0.1), (method, errors)
 
 
-def plane_photons(xy: np.ndarray) -> PhotonMap:
-    """Photons at positions xy (n, 2) on the plane z = 0, facing up, one per emitted path."""
-    n = len(xy)
+def test_initial_radii_follow_density_and_footprint() -> None:
+    # Photons on a plane, uniform at density n per unit area: the radius of the disc that
+    # holds the NEAREST-th is about √(k / (π n)); a point far from all photons gets the
+    # footprint's cap; no bounding box anywhere.
+    rng = np.random.default_rng(3)
+    n = 40_000
+    xy = rng.uniform(-1, 1, (n, 2))
     position = np.c_[xy, np.zeros(n)].astype(np.float32)
     normal = np.tile(np.float32([0, 0, 1]), (n, 1))
     flux = np.full((n, 3), 1 / n, np.float32)
-    return PhotonMap(
+    photons = PhotonMap(
         position, normal, flux, normal.copy(), np.ones(n, bool), np.ones(n, np.uint16),
         np.arange(n), n,
     )  # fmt: skip
-
-
-def grid_points(half: float, width: float) -> tuple[np.ndarray, np.ndarray]:
-    """Points (n, 3) on a square grid of spacing `width` over [-half, half]², normals up."""
-    axis = np.arange(-half, half + 1e-9, width)
-    x, y = np.meshgrid(axis, axis)
-    points = np.c_[x.ravel(), y.ravel(), np.zeros(x.size)]
-    return points, np.tile([0.0, 0.0, 1.0], (len(points), 1))
-
-
-def test_pilot_widens_where_the_caustic_is_smooth() -> None:
-    # The held-out test asks for a wide disc where the density is flat (only noise to
-    # remove) and a narrow one on a caustic narrower than a few pixels (blur dominates).
-    rng = np.random.default_rng(3)
-    width = 0.01
-    points, up = grid_points(0.1, width)
-    footprint = np.full(len(points), width)
-    flat = plane_photons(rng.uniform(-0.2, 0.2, (20_000, 2)))
-    sharp = plane_photons(rng.normal(0, 0.7 * width, (20_000, 2)))
-    wide = pilot_footprints(points, up, footprint, flat)
-    narrow = pilot_footprints(points, up, footprint, sharp)
-    assert wide == pytest.approx(CANDIDATES[-1])
-    assert CANDIDATES[0] <= narrow < 1.0
-    # the radius is that multiple of each point's own footprint, scaled by SHRINK
-    r = initial_radii(points, up, 2 * footprint, sharp)
-    assert np.all(r == r[0]) and r[0] > 0
-    r_flat = initial_radii(points, up, footprint, flat)
-    assert r_flat[0] == pytest.approx(SHRINK * CANDIDATES[-1] * width)
-
-
-def test_initial_radii_without_photons_or_footprint() -> None:
-    # Too few photons to test: FALLBACK footprints. No camera (no footprint): the distance to
-    # the NEAREST-th photon, √(k / (π n)) at density n; a point far from all takes the largest.
-    rng = np.random.default_rng(4)
     points = np.array([[0.0, 0.0, 0.0], [0.3, -0.2, 0.0], [50.0, 0.0, 0.0]])
     up = np.tile([0.0, 0.0, 1.0], (3, 1))
-    few = plane_photons(rng.uniform(-1, 1, (2 * NEAREST - 2, 2)))
-    r = initial_radii(points, up, np.full(3, 0.01), few)
-    np.testing.assert_allclose(r, SHRINK * FALLBACK * 0.01)
-    n = 40_000
-    photons = plane_photons(rng.uniform(-1, 1, (n, 2)))
-    r = initial_radii(points, up, None, photons)
-    knn = math.sqrt(NEAREST / (math.pi * n / 4))
-    np.testing.assert_allclose(r[:2], knn, rtol=0.35)
-    assert r[2] == r.max() and r[2] > 10
+    footprint = np.full(3, 0.01)
+    r = initial_radii(points, up, footprint, photons)
+    density = n / 4
+    knn = math.sqrt(NEAREST / (math.pi * density))
+    expected = SHAPE * knn ** (1 / 3) * 0.01 ** (2 / 3)
+    np.testing.assert_allclose(r[:2], min(expected, FOOTPRINTS * 0.01), rtol=0.35)
+    assert r[2] == pytest.approx(FOOTPRINTS * 0.01)

@@ -98,9 +98,6 @@ class CPPM(Progressive):
     summary: ClassVar[str] = (
         "chi-squared PPM: a radius shrinks only where its disc's photons are not uniform"
     )
-    # A radius kept where the photons look uniform wants a narrower start than PPM's
-    # (effective multiples 0.4, 0.55, 0.7 on the examples: default / best 1.10, 1.11, 1.21).
-    scale: ClassVar[float] = 0.5 / 0.6
 
     def start(self, n: int, radius: Radius) -> CPPMState:
         """The state before the first pass, for n points with initial radius `radius`."""

@@ -137,10 +137,6 @@ class NPPM(Progressive):
     )
     options: ClassVar[frozenset[str]] = frozenset({"weights"})  # render options it reads
     stage: ClassVar[str] = NETWORK
-    # The shaped kernel is narrower than the disc it lives in, so the disc starts wider than
-    # PPM's (effective multiples 0.7, 0.85, 1.0 of the held-out test's on the examples:
-    # default / best tuned classic 1.18, 1.16, 1.18).
-    scale: ClassVar[float] = 0.85 / 0.6
 
     weights: str = ""
 

@@ -25,6 +25,18 @@ from dpm.scene import Scene
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import BVH, PhotonMap, VisiblePoints, trace_photons, trace_visible_points
 
+# Default emitted photon paths per pass per pixel. Each pass also traces one camera sample per
+# pixel, and a pixel's estimate averages its footprint only over the passes: ten passes (the
+# fixed-point methods' default) left sppm at 1.3-1.9x its own best on the examples, whose best
+# settings all ran 100-1000 passes. Chosen on the examples (`benchmarks/sppm_defaults.py`).
+PATHS_PER_PIXEL = 1.0
+
+
+def default_paths_per_pass(n_paths: int, pixels: int) -> int:
+    """Emitted paths per pass of an sppm run of n_paths over `pixels` pixels by default:
+    PATHS_PER_PIXEL per pixel, at least 1, at most the run."""
+    return max(1, min(n_paths, round(PATHS_PER_PIXEL * pixels)))
+
 
 def sppm_caustics(
     scene: Scene,
@@ -37,24 +49,31 @@ def sppm_caustics(
     alpha: float = ALPHA,
     progress: bool = False,
     watch: Stopwatch | None = None,
+    stream: PhotonMap | None = None,
 ) -> tuple[np.ndarray, int]:
     """((H, W, 3) float32 caustic radiance per pixel as the camera sees it, caustic photons)
     from n_paths emitted photon paths in passes of photons_per_pass from the initial radius
     (scene units; None: each pixel's from its first visible point, `pixel_radii`); stages
-    "visible_points", "photons", "gather" and "estimate" count on watch."""
+    "visible_points", "photons", "gather" and "estimate" count on watch. `stream`: the
+    caustic photons of those n_paths paths, traced before (a benchmark sweeping settings
+    over one stream), whose consecutive slices are the passes a run would trace."""
     check_progressive(radius or 1.0, photons_per_pass, alpha)
     watch = watch or Stopwatch()
     state = PPMState.start(camera.width * camera.height, radius or 1.0, alpha)
     n_passes = -(-n_paths // photons_per_pass)
+    passes = None if stream is None else stream.split(photons_per_pass)
     for j in tqdm(range(n_passes), unit="pass", disable=not progress, desc="sppm"):
         with watch("visible_points"):
             points = trace_visible_points(
                 scene, bvh, camera, 1, pass_seed(seed, j), (0, camera.height)
             )
         with watch("photons"):
-            photons = trace_photons(
-                scene, bvh, min(photons_per_pass, n_paths - j * photons_per_pass), seed,
-                caustic_only=True, first_path=j * photons_per_pass,
+            photons = (
+                passes[j] if passes is not None
+                else trace_photons(
+                    scene, bvh, min(photons_per_pass, n_paths - j * photons_per_pass), seed,
+                    caustic_only=True, first_path=j * photons_per_pass,
+                )
             )  # fmt: skip
         if j == 0 and radius is None:
             with watch("estimate"):

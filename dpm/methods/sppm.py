@@ -13,7 +13,7 @@ import numpy as np
 
 from dpm.camera import Camera
 from dpm.errors import InputError
-from dpm.estimators.sppm import SPPM
+from dpm.estimators.sppm import SPPM, default_paths_per_pass
 from dpm.methods.base import Progressive
 from dpm.options import RenderOptions
 from dpm.stopwatch import Stopwatch
@@ -39,9 +39,17 @@ class StochasticPPM(Progressive):
                 "sppm's caustic component has no albedo and normal images to denoise with"
             )
 
+    def photons_per_pass(self) -> int:
+        """Emitted paths per pass: --photons-per-pass, or from the pixel count
+        (`default_paths_per_pass`)."""
+        return self.options.photons_per_pass or default_paths_per_pass(
+            self.options.photons, self.pixels
+        )
+
     def prepare(self, bvh: BVH, camera: Camera, watch: Stopwatch) -> None:
         """Render the caustic image, pass by pass."""
         o = self.options
+        self.pixels = camera.width * camera.height
         self.est = self.estimator()
         self.image, self.caustic_photons = self.est.estimate_pixels(
             self.scene, bvh, camera, o.photons, o.seed, progress=o.progress, watch=watch
