@@ -27,9 +27,12 @@ from dpm.tracer import BVH, PhotonMap, VisiblePoints, trace_photons, trace_visib
 
 # Default emitted photon paths per pass per pixel. Each pass also traces one camera sample per
 # pixel, and a pixel's estimate averages its footprint only over the passes: ten passes (the
-# fixed-point methods' default) left sppm at 1.3-1.9x its own best on the examples, whose best
-# settings all ran 100-1000 passes. Chosen on the examples (`benchmarks/sppm_defaults.py`).
-PATHS_PER_PIXEL = 1.0
+# fixed-point methods' default) left sppm at 1.26-1.92x its own best at M paths on the examples,
+# whose best settings all ran 1000 passes. Fewer paths per pass is better at equal paths and
+# slower (examples at M, default / own best: 0.1 per pixel 1.17, 0.25 1.21, 0.5 1.25, 1 1.31,
+# 4 1.43; the egg at 128x128 took 10.9, 5.0 and 2.0 s at 0.1, 0.25 and 1): 0.25 spends on
+# camera samples four times what it spends on photon paths. `benchmarks/sppm_defaults.py`.
+PATHS_PER_PIXEL = 0.25
 
 
 def default_paths_per_pass(n_paths: int, pixels: int) -> int:
