@@ -6,12 +6,15 @@
 `radius_defaults.py` scores the methods at fixed visible points; SPPM traces new ones every
 pass, so it is scored per pixel, against the caustic references of `caustic_references.py`
 (two independent halves, so their noise is known; a uniformly scaled copy against its
-scale-1 twin's). Per scene, at M and 10·M emitted photon paths (seed 0; one caustic photon
-stream traced once, its consecutive slices the passes), `sppm` at its defaults (no radius,
+scale-1 twin's). Per scene, at M and 10·M emitted photon paths (the committed table holds M
+only; seed 0; one caustic photon stream traced once, its consecutive slices the passes),
+`sppm` at its defaults (no radius,
 `default_paths_per_pass`: what `dpm-render --method sppm` does) against its own best of 30
 settings: 10 initial radii log-spaced from 0.15 to 6 median pixel widths × 10, 100 and 1000
-passes, the radii extended by three more past an edge the best lands on. The defaults were
-chosen on the example scenes (`dpm.density.radius`), never on the unseen ones.
+passes, the radii extended by three more past an edge the best lands on (six more at
+most). The pass axis is not extended: at M almost every best ran 1000 passes, the most tried,
+so the own best is capped there and default / best flatters the default. The defaults were
+chosen on the example scenes, never on the unseen ones.
 
 Each scene writes results/sppm_defaults/SET/NAME.json after every budget (a rerun skips
 the budgets it holds; `--defaults-only` reruns their defaults and keeps the 30 settings);
@@ -53,7 +56,7 @@ TABLE = RESULTS / "sppm_defaults.md"
 EXAMPLES = ("dragon", "glass_egg", "pool1", "pool2", "red_wine", "ring", "torus")
 PASSES = (10, 100, 1000)
 RADII = np.geomspace(0.15, 6.0, 10)  # tuned initial radii, in median pixel widths
-EXTEND = 3  # radii added past an edge the best lands on
+EXTEND = 3  # radii added past an edge the best lands on (twice at most)
 
 
 def scene_names(set_: str) -> list[str]:
@@ -84,13 +87,19 @@ def run_scene(name: str, set_: str, budgets: tuple[int, ...], defaults_only: boo
             continue
         stream = trace_photons(scene, bvh, n, seed=0, caustic_only=True)
         score = partial(sppm_rmse, scene, bvh, camera, stream, reference)
-        default = score(None, default_paths_per_pass(n, width * height))
+        per_pass = default_paths_per_pass(n, width * height)
+        default = {
+            "default": score(None, per_pass),
+            "default_per_pass": per_pass,
+            "default_machine": cpu(),
+            "default_date": datetime.date.today().isoformat(),
+        }
         if defaults_only:
-            done[n]["default"] = default
-            print(name, n, f"default {default:.5f}", flush=True)
+            done[n].update(default)
+            print(name, n, f"default {default['default']:.5f}", flush=True)
             save_record(path, name, set_, (width, height), noise, pixel, rows)
             continue
-        row = {"paths": n, "caustic_photons": len(stream), "default": default, "trials": []}
+        row = {"paths": n, "caustic_photons": len(stream), **default, "trials": []}
         radii = list(pixel * RADII)
         tried: set[float] = set()
         while True:
@@ -121,11 +130,14 @@ def save_record(
     path: Path, name: str, set_: str, size_: tuple[int, int], noise: float, pixel: float,
     rows: list[dict],
 ) -> None:  # fmt: skip
-    """Write a scene's record: its rows in budget order, the machine and the date."""
+    """Write a scene's record: its rows in budget order, and where and when its settings were
+    first tuned (the machine and date a record already holds are kept)."""
+    old = json.loads(path.read_text()) if path.exists() else {}
     save(path, {
         "scene": name, "set": set_, "size": list(size_), "noise": noise, "pixel_width": pixel,
-        "budgets": sorted(rows, key=lambda r: r["paths"]), "machine": cpu(),
-        "date": datetime.date.today().isoformat(),
+        "budgets": sorted(rows, key=lambda r: r["paths"]),
+        "machine": old.get("machine", cpu()),
+        "date": old.get("date", datetime.date.today().isoformat()),
     })  # fmt: skip
 
 
@@ -165,7 +177,6 @@ def markdown() -> str:
             continue
         rows, ratios = [], []
         for r in records:
-            pixels = r["size"][0] * r["size"][1]
             for row in r["budgets"]:
                 ratio = row["default"] / row["best"]["rmse"]
                 ratios.append(ratio)
@@ -173,14 +184,14 @@ def markdown() -> str:
                 rows.append([
                     r["scene"], f"{row['paths']:,}", f"{row['caustic_photons']:,}",
                     f"{r['noise']:.4f}",
-                    f"{-(-row['paths'] // default_paths_per_pass(row['paths'], pixels))}",
+                    f"{-(-row['paths'] // row['default_per_pass'])}",
                     f"{row['default']:.4f}", f"{best['rmse']:.4f}",
                     f"{best['radius'] / r['pixel_width']:.2f} px, {best['passes']} passes",
                     f"{ratio:.2f}",
                 ])  # fmt: skip
         head = ["scene", "paths", "caustic photons", "ref. noise", "default passes", "default",
                 "best", "best setting", "default / best"]  # fmt: skip
-        machines = "; ".join(sorted({r["machine"] for r in records}))
+        machines = "; ".join(sorted({r["machine"] for r in records}))  # RMSE: any will do
         geo = float(np.exp(np.mean(np.log(ratios))))
         lines += ["", f"## {set_} ({machines})", "", *markdown_table(head, rows), "",
                   f"- sppm: geometric mean {geo:.2f}, worst {max(ratios):.2f} "

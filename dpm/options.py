@@ -61,7 +61,7 @@ class RenderOptions:
         None,
         "emitted photon paths per pass",
         scoped=True,
-        default_text="photons / 10; auto: planned",
+        default_text="photons / 10; sppm: 0.25 per pixel; auto: planned",
     )
     checkpoint: Path | None = _option(
         None, "save the statistics here as it goes and resume from them", scoped=True,

@@ -161,11 +161,13 @@ def test_sppm_passes_follow_the_pixel_count(scene_path: Path) -> None:
     # from the pixel count, not from the photon budget; --photons-per-pass still rules.
     scene = load_scene(scene_path)
     for width, height in ((8, 8), (16, 8)):
-        opts = RenderOptions(method="sppm", spp=1, width=width, height=height, photons=5000,
+        opts = RenderOptions(method="sppm", spp=1, width=width, height=height, photons=1000,
                              component="caustic", progress=False, denoise=False)  # fmt: skip
         stats = render(scene, opts).stats
-        assert stats["photons_per_pass"] == default_paths_per_pass(5000, width * height)
+        assert stats["photons_per_pass"] == default_paths_per_pass(1000, width * height)
+    assert default_paths_per_pass(1000, 64) == 16  # 0.25 per pixel
     assert default_paths_per_pass(5000, 10**6) == 5000  # never more than the run
-    assert default_paths_per_pass(5000, 0) == 1
+    assert default_paths_per_pass(10**7, 64) == 10**4  # at most MAX_PASSES passes
+    assert default_paths_per_pass(5000, 0) == 5
     opts.photons_per_pass = 700
     assert render(scene, opts).stats["photons_per_pass"] == 700

@@ -27,18 +27,21 @@ from dpm.tracer import BVH, PhotonMap, VisiblePoints, trace_photons, trace_visib
 
 # Default emitted photon paths per pass per pixel. Each pass also traces one camera sample per
 # pixel, and a pixel's estimate averages its footprint only over the passes: ten passes (the
-# fixed-point methods' default) left sppm at 1.26-1.92x its own best at M paths on the examples,
-# whose best settings all ran 1000 passes. Fewer paths per pass is better at equal paths and
-# slower (examples at M, default / own best: 0.1 per pixel 1.17, 0.25 1.21, 0.5 1.25, 1 1.31,
-# 4 1.43; the egg at 128x128 took 10.9, 5.0 and 2.0 s at 0.1, 0.25 and 1): 0.25 spends on
-# camera samples four times what it spends on photon paths. `benchmarks/sppm_defaults.py`.
+# fixed-point methods' default) left sppm at 1.4-1.9x its own best at M paths on the examples,
+# whose best settings almost all ran 1000 passes. Fewer paths per pass is better at equal paths
+# and slower (four examples at M, default / own best: 0.1 per pixel 1.17, 0.25 1.21, 0.5 1.25,
+# 1 1.31, 4 1.43; the egg at 128x128 took 10.9, 5.0 and 2.0 s at 0.1, 0.25 and 1): 0.25 spends
+# on camera samples four times what it spends on photon paths. `benchmarks/sppm_defaults.py`.
 PATHS_PER_PIXEL = 0.25
+MAX_PASSES = 1000  # beyond it, passes grow longer instead (a tiny image would want thousands)
 
 
 def default_paths_per_pass(n_paths: int, pixels: int) -> int:
     """Emitted paths per pass of an sppm run of n_paths over `pixels` pixels by default:
-    PATHS_PER_PIXEL per pixel, at least 1, at most the run."""
-    return max(1, min(n_paths, round(PATHS_PER_PIXEL * pixels)))
+    PATHS_PER_PIXEL per pixel, but at most MAX_PASSES passes, at least 1 path, at most the
+    run."""
+    per_pass = max(round(PATHS_PER_PIXEL * pixels), -(-n_paths // MAX_PASSES), 1)
+    return min(n_paths, per_pass) if n_paths >= 1 else 1
 
 
 def sppm_caustics(
@@ -64,6 +67,8 @@ def sppm_caustics(
     watch = watch or Stopwatch()
     state = PPMState.start(camera.width * camera.height, radius or 1.0, alpha)
     n_passes = -(-n_paths // photons_per_pass)
+    if stream is not None and stream.n_paths != n_paths:
+        raise ValueError(f"the stream holds {stream.n_paths} paths, not {n_paths}")
     passes = None if stream is None else stream.split(photons_per_pass)
     for j in tqdm(range(n_passes), unit="pass", disable=not progress, desc="sppm"):
         with watch("visible_points"):

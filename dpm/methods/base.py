@@ -27,7 +27,7 @@ from dpm.scene import Scene
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import BVH, VisiblePoints, trace_photons
 
-PASSES = 10  # default passes of the progressive methods: photons_per_pass = photons / PASSES
+PASSES = 10  # default passes of the progressive methods (sppm's come from its pixel count)
 
 
 class Method:

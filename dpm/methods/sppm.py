@@ -29,6 +29,7 @@ class StochasticPPM(Progressive):
     options = frozenset({"radius", "photons_per_pass"})
     at_points = False
     all_points = False
+    pixels: int | None = None  # the image's, once `prepare` knows the camera
 
     @classmethod
     def check(cls, options: RenderOptions) -> None:
@@ -41,10 +42,12 @@ class StochasticPPM(Progressive):
 
     def photons_per_pass(self) -> int:
         """Emitted paths per pass: --photons-per-pass, or from the pixel count
-        (`default_paths_per_pass`)."""
-        return self.options.photons_per_pass or default_paths_per_pass(
-            self.options.photons, self.pixels
-        )
+        (`default_paths_per_pass`), known once `prepare` has the camera."""
+        if self.options.photons_per_pass:
+            return self.options.photons_per_pass
+        if self.pixels is None:
+            raise RuntimeError("sppm's paths per pass depend on the camera: call prepare first")
+        return default_paths_per_pass(self.options.photons, self.pixels)
 
     def prepare(self, bvh: BVH, camera: Camera, watch: Stopwatch) -> None:
         """Render the caustic image, pass by pass."""
