@@ -27,11 +27,12 @@ from dpm.tracer import BVH, PhotonMap, VisiblePoints, trace_photons, trace_visib
 
 # Default emitted photon paths per pass per pixel. Each pass also traces one camera sample per
 # pixel, and a pixel's estimate averages its footprint only over the passes: ten passes (the
-# fixed-point methods' default) left sppm at 1.4-1.9x its own best at M paths on the examples,
-# whose best settings almost all ran 1000 passes. Fewer paths per pass is better at equal paths
-# and slower (four examples at M, default / own best: 0.1 per pixel 1.17, 0.25 1.21, 0.5 1.25,
-# 1 1.31, 4 1.43; the egg at 128x128 took 10.9, 5.0 and 2.0 s at 0.1, 0.25 and 1): 0.25 spends
-# on camera samples four times what it spends on photon paths. `benchmarks/sppm_defaults.py`.
+# fixed-point methods' default) left sppm at 1.26-1.92x its own best at M paths on the
+# examples, whose best settings almost all ran 1000 passes. Fewer paths per pass is better at
+# equal paths and slower (the seven examples at M, default / own best: 0.1 per pixel 1.09,
+# 0.25 1.16, 0.5 1.20, 1 1.28, 4 1.47; the egg at 128x128 took 10.9, 5.0 and 2.0 s at 0.1,
+# 0.25 and 1): 0.25 spends on camera samples four times what it spends on photon paths.
+# `benchmarks/sppm_defaults.py`.
 PATHS_PER_PIXEL = 0.25
 MAX_PASSES = 1000  # beyond it, passes grow longer instead (a tiny image would want thousands)
 
