@@ -7,7 +7,8 @@
 pass, so it is scored per pixel, against the caustic references of `caustic_references.py`
 (two independent halves, so their noise is known; a uniformly scaled copy against its
 scale-1 twin's). Per scene, at M and 10·M emitted photon paths (the committed table holds M
-only; seed 0; one caustic photon stream traced once, its consecutive slices the passes),
+only; seed 0; one caustic photon stream traced once, its consecutive slices the passes,
+and one run per pass count for all radii, `sppm_caustics_at_radii`),
 `sppm` at its defaults (no radius,
 `default_paths_per_pass`: what `dpm-render --method sppm` does) against its own best of 30
 settings: 10 initial radii log-spaced from 0.15 to 6 median pixel widths × 10, 100 and 1000
@@ -31,15 +32,15 @@ from functools import partial
 from pathlib import Path
 
 import numpy as np
-from caustic_references import load_reference, size
+from caustic_references import EXAMPLES, load_reference, size
 
 sys.path.insert(0, str(Path(__file__).parent / "scenes"))
-from make_unseen import CONTROLS, unit_scale  # noqa: E402
+from make_unseen import CONTROLS, UNSEEN, unit_scale  # noqa: E402
 
 from common import RESULTS, M, cpu, markdown_table  # noqa: E402
 from dpm import load_scene  # noqa: E402
 from dpm.camera import Camera  # noqa: E402
-from dpm.estimators.sppm import default_paths_per_pass, sppm_caustics  # noqa: E402
+from dpm.estimators.sppm import default_paths_per_pass, sppm_caustics_at_radii  # noqa: E402
 from dpm.io import atomic  # noqa: E402
 from dpm.metrics import rmse  # noqa: E402
 from dpm.scene import Scene  # noqa: E402
@@ -53,7 +54,6 @@ from dpm.tracer import (  # noqa: E402
 
 OUT = RESULTS / "sppm_defaults"
 TABLE = RESULTS / "sppm_defaults.md"
-EXAMPLES = ("dragon", "glass_egg", "pool1", "pool2", "red_wine", "ring", "torus")
 PASSES = (10, 100, 1000)
 RADII = np.geomspace(0.15, 6.0, 10)  # tuned initial radii, in median pixel widths
 EXTEND = 3  # radii added past an edge the best lands on (twice at most)
@@ -61,11 +61,7 @@ EXTEND = 3  # radii added past an edge the best lands on (twice at most)
 
 def scene_names(set_: str) -> list[str]:
     """The scenes of a set that have caustics to score."""
-    if set_ == "examples":
-        return list(EXAMPLES)
-    from make_unseen import unseen_scenes
-
-    return [p.stem for p in unseen_scenes() if p.stem not in CONTROLS]
+    return list(EXAMPLES) if set_ == "examples" else [n for n in UNSEEN if n not in CONTROLS]
 
 
 def run_scene(name: str, set_: str, budgets: tuple[int, ...], defaults_only: bool = False) -> dict:
@@ -86,10 +82,10 @@ def run_scene(name: str, set_: str, budgets: tuple[int, ...], defaults_only: boo
         if (n in done) != defaults_only:
             continue
         stream = trace_photons(scene, bvh, n, seed=0, caustic_only=True)
-        score = partial(sppm_rmse, scene, bvh, camera, stream, reference)
+        scores = partial(sppm_rmses, scene, bvh, camera, stream, reference)
         per_pass = default_paths_per_pass(n, width * height)
         default = {
-            "default": score(None, per_pass),
+            "default": scores([None], per_pass)[0],
             "default_per_pass": per_pass,
             "default_machine": cpu(),
             "default_date": datetime.date.today().isoformat(),
@@ -100,19 +96,16 @@ def run_scene(name: str, set_: str, budgets: tuple[int, ...], defaults_only: boo
             save_record(path, name, set_, (width, height), noise, pixel, rows)
             continue
         row = {"paths": n, "caustic_photons": len(stream), **default, "trials": []}
-        radii = list(pixel * RADII)
-        tried: set[float] = set()
-        while True:
-            for r in radii:
-                if r in tried:
-                    continue
-                tried.add(r)
+        radii, tried, step = list(pixel * RADII), [], RADII[1] / RADII[0]
+        while True:  # one run per pass count tries a round's radii at once
+            tried += radii
+            for p in PASSES:
                 row["trials"] += [
-                    {"radius": r, "passes": p, "rmse": score(r, -(-n // p))} for p in PASSES
+                    {"radius": r, "passes": p, "rmse": e}
+                    for r, e in zip(radii, scores(radii, -(-n // p)), strict=True)
                 ]  # fmt: skip
             best = min(row["trials"], key=lambda t: t["rmse"])
             low, high = min(tried), max(tried)
-            step = RADII[1] / RADII[0]
             if best["radius"] == low and len(tried) < len(RADII) + 2 * EXTEND:
                 radii = [low / step**k for k in range(1, EXTEND + 1)]
             elif best["radius"] == high and len(tried) < len(RADII) + 2 * EXTEND:
@@ -141,17 +134,17 @@ def save_record(
     })  # fmt: skip
 
 
-def sppm_rmse(
+def sppm_rmses(
     scene: Scene, bvh: BVH, camera: Camera, stream: PhotonMap, reference: np.ndarray,
-    radius: float | None, per_pass: int,
-) -> float:  # fmt: skip
+    radii: list[float | None], per_pass: int,
+) -> list[float]:  # fmt: skip
     """Per-pixel RMSE against the reference (H, W, 3) of sppm over one photon stream in
-    passes of `per_pass` paths from initial radius `radius` (scene units; None: its
-    default)."""
-    image, _ = sppm_caustics(
-        scene, bvh, camera, stream.n_paths, 0, radius, per_pass, stream=stream
+    passes of `per_pass` paths from each initial radius of `radii` (scene units; None: its
+    default), the runs sharing their camera samples (`sppm_caustics_at_radii`)."""
+    images, _ = sppm_caustics_at_radii(
+        scene, bvh, camera, stream.n_paths, 0, radii, per_pass, stream=stream
     )  # fmt: skip
-    return rmse(image, reference)
+    return [rmse(image, reference) for image in images]
 
 
 def save(path: Path, record: dict) -> None:

@@ -156,22 +156,9 @@ def test_dpm_render_nppm_with_a_fresh_network_is_ppm(tmp_path: Path, capsys) -> 
     from dpm.io import read_exr
 
     scene = Path(__file__).parent.parent / "examples" / "scenes" / "glass_egg.obj"
-    base = [
-        str(scene),
-        "--quiet",
-        "--width",
-        "16",
-        "--height",
-        "16",
-        "--spp",
-        "1",
-        "--photons",
-        "40000",
-        "--photons-per-pass",
-        "10000",
-        "--radius",
-        "0.05",
-    ]  # fmt: skip  (nppm's default disc starts wider than PPM's)
+    # one given radius: nppm's default disc starts wider than PPM's
+    base = [str(scene), "--quiet", "--width", "16", "--height", "16", "--spp", "1",
+            "--photons", "40000", "--photons-per-pass", "10000", "--radius", "0.05"]  # fmt: skip
     fresh = network(tmp_path / "fresh.msgpack")
     for method, extra in (("ppm", []), ("nppm", ["--weights", fresh])):
         out = tmp_path / f"{method}.exr"

@@ -56,20 +56,42 @@ def sppm_caustics(
     alpha: float = ALPHA,
     progress: bool = False,
     watch: Stopwatch | None = None,
-    stream: PhotonMap | None = None,
 ) -> tuple[np.ndarray, int]:
     """((H, W, 3) float32 caustic radiance per pixel as the camera sees it, caustic photons)
     from n_paths emitted photon paths in passes of photons_per_pass from the initial radius
     (scene units; None: each pixel's from its first visible point, `pixel_radii`); stages
-    "visible_points", "photons", "gather" and "estimate" count on watch. `stream`: the
-    caustic photons of those n_paths paths, traced before (a benchmark sweeping settings
-    over one stream), whose consecutive slices are the passes a run would trace."""
-    check_progressive(radius or 1.0, photons_per_pass, alpha)
-    watch = watch or Stopwatch()
-    state = PPMState.start(camera.width * camera.height, radius or 1.0, alpha)
-    n_passes = -(-n_paths // photons_per_pass)
+    "visible_points", "photons", "gather" and "estimate" count on watch."""
+    images, photons = sppm_caustics_at_radii(
+        scene, bvh, camera, n_paths, seed, (radius,), photons_per_pass, alpha, progress, watch
+    )  # fmt: skip
+    return images[0], photons
+
+
+def sppm_caustics_at_radii(
+    scene: Scene,
+    bvh: BVH,
+    camera: Camera,
+    n_paths: int,
+    seed: int,
+    radii: Sequence[float | None],
+    photons_per_pass: int,
+    alpha: float = ALPHA,
+    progress: bool = False,
+    watch: Stopwatch | None = None,
+    stream: PhotonMap | None = None,
+) -> tuple[list[np.ndarray], int]:
+    """`sppm_caustics` from each initial radius of `radii` at once ((H, W, 3) float32 images
+    in that order, and the caustic photons): the runs share every pass's camera samples,
+    photons and one photon search. `stream`: the caustic photons of those n_paths paths,
+    traced before (a benchmark sweeping settings over one stream), whose consecutive slices
+    are the passes a run would trace."""
+    for radius in radii:
+        check_progressive(radius or 1.0, photons_per_pass, alpha)
     if stream is not None and stream.n_paths != n_paths:
         raise ValueError(f"the stream holds {stream.n_paths} paths, not {n_paths}")
+    watch = watch or Stopwatch()
+    states = [PPMState.start(camera.width * camera.height, r or 1.0, alpha) for r in radii]
+    n_passes = -(-n_paths // photons_per_pass)
     passes = None if stream is None else stream.split(photons_per_pass)
     for j in tqdm(range(n_passes), unit="pass", disable=not progress, desc="sppm"):
         with watch("visible_points"):
@@ -84,12 +106,18 @@ def sppm_caustics(
                     caustic_only=True, first_path=j * photons_per_pass,
                 )
             )  # fmt: skip
-        if j == 0 and radius is None:
+        if j == 0 and None in radii:
             with watch("estimate"):
-                state.radius = pixel_radii(points, photons)
-        sppm_gather((state,), points, photons, watch)
-    image = state.irradiance()  # already weighted by throughput · ρ/π: radiance
-    return image.reshape(camera.height, camera.width, 3).astype(np.float32), state.photons
+                own = pixel_radii(points, photons)
+            for state, radius in zip(states, radii, strict=True):
+                if radius is None:
+                    state.radius = own.copy()
+        sppm_gather(states, points, photons, watch)
+    # already weighted by throughput · ρ/π: radiance
+    images = [
+        s.irradiance().reshape(camera.height, camera.width, 3).astype(np.float32) for s in states
+    ]
+    return images, states[0].photons
 
 
 def pixel_radii(points: VisiblePoints, photons: PhotonMap) -> np.ndarray:
