@@ -20,13 +20,21 @@ example scene (default the ring; its caustic photons of M emitted paths, seed 0)
   network's steps hold at most, BLOCKS_IN_FLIGHT calls at once, as `predict_points` runs
   the network: what XLA's dots reach on this architecture's shapes here.
 Prints `fraction of peak: X` (the worst of the four) and writes
-benchmarks/results/inference.md; `--quick` (CI) runs 4,096 points once and writes nothing.
+benchmarks/results/inference.md (or --out); `--quick` (CI) runs 4,096 points once and writes
+nothing.
+
+The fused kernel is compiled for the vector width of Numba's target (`fused.LANES`: 16
+floats with AVX-512, else 8), named in the table. To measure AVX2 code on an AVX-512 host, run
+with NUMBA_CPU_NAME=haswell, NUMBA_CPU_FEATURES set to Haswell's features with -avx512f, and
+XLA_FLAGS=--xla_cpu_max_isa=AVX2 (the peak then is AVX2's too).
 """
 
 from __future__ import annotations
 
 import argparse
 import datetime
+import os
+import sys
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -39,6 +47,7 @@ import numpy as np
 from common import RESULTS, SCENES, M, cpu, markdown_table
 from dpm import load_scene
 from dpm.density.gather import PhotonIndex
+from dpm.nn.fused import LANES
 from dpm.nn.infer import (
     ACTIVATIONS_PER_CHUNK,
     BLOCKS_IN_FLIGHT,
@@ -49,6 +58,7 @@ from dpm.nn.weights import load_weights, shipped_weights
 from dpm.tracer import build_bvh, trace_photons, trace_visible_points
 
 KS = (50, 500)
+TARGET_VARIABLES = ("NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES", "XLA_FLAGS")  # code-generation targets
 POINTS = (65_536, 262_144)
 # XLA's experimental YNNPACK dots: the peak is the better of these and XLA's own
 YNN_DOTS = {"xla_cpu_experimental_ynn_fusion_type": "LIBRARY_FUSION_TYPE_DOT"}
@@ -202,7 +212,10 @@ def report(rows: list[dict], peak: float, alone: float, name: str) -> list[str]:
         f"{BLOCKS_IN_FLIGHT} calls at once: {alone:.1f} GFLOP/s, "
         f"{alone / peak:.2f} of peak.",
         "",
-        f"Machine: {cpu()}; JAX {jax.__version__}; {datetime.date.today().isoformat()}",
+        f"Machine: {cpu()}; JAX {jax.__version__}; fused kernel compiled for {LANES}-float "
+        f"vectors ({'AVX-512' if LANES == 16 else 'AVX2'}); "
+        f"NUMBA_CPU_NAME={os.environ.get('NUMBA_CPU_NAME', 'host')}, "
+        f"XLA_FLAGS={os.environ.get('XLA_FLAGS', '')!r}; {datetime.date.today().isoformat()}",
     ]
 
 
@@ -211,6 +224,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="4,096 points, one run, no file")
     parser.add_argument("--scene", default="ring", help="example scene (default: ring)")
+    parser.add_argument("--out", default="inference.md", help="file under benchmarks/results")
     args = parser.parse_args()
     # as many tries for the network as for the peak: best-of-N favours the one with more
     points, rounds, sizes = ((4096,), 1, (512,)) if args.quick else (POINTS, 5, (1024, 2048))
@@ -222,14 +236,16 @@ def main() -> None:
     print("\n".join(lines))
     print(f"fraction of peak: {min(r['gflops'] for r in rows) / peak:.2f}")
     if not args.quick:
+        settings = [f"{k}={os.environ[k]}" for k in TARGET_VARIABLES if k in os.environ]
+        command = " ".join([*settings, "python", "benchmarks/inference.py", *sys.argv[1:]])
         text = [
             "# Network inference against the matmul peak",
             "",
-            "Made by `python benchmarks/inference.py` (see its docstring for what is counted).",
+            f"Made by `{command}` (see its docstring for what is counted).",
             "",
             *lines,
         ]
-        (RESULTS / "inference.md").write_text("\n".join(text) + "\n")
+        (RESULTS / args.out).write_text("\n".join(text) + "\n")
 
 
 if __name__ == "__main__":

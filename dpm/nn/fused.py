@@ -29,6 +29,7 @@ import numba as nb
 import numpy as np
 from llvmlite import ir
 from numba.core import cgutils, types
+from numba.core.registry import cpu_target
 from numba.extending import intrinsic
 
 from dpm.nn.features import MIN_RADIUS
@@ -38,9 +39,21 @@ from dpm.tracer.sampling import orthonormal_basis
 
 CHANNELS = 9  # input features per photon
 WIDTH = 32  # channels of every hidden layer
-LANES = 16  # floats per vector register (AVX-512; narrower machines split each vector)
+
+
+def target_vector_floats() -> int:
+    """float32 lanes of the widest vector register Numba compiles for here: 16 with AVX-512F,
+    else 8 (AVX2). It follows `NUMBA_CPU_FEATURES` where set, else the host's features."""
+    features = cpu_target.target_context.codegen()._get_host_cpu_features()
+    return 16 if "+avx512f" in features.split(",") else 8
+
+
+# The micro-kernel's accumulators must fit the register file with room for the weights and
+# the broadcast input: 4 photons × 2 zmm of AVX-512's 32 registers, 2 photons × 4 ymm of
+# AVX2's 16 (16-float vectors there split in two and spilled: 0.37-0.47 of peak on Zen 3).
+LANES = target_vector_floats()  # floats per vector register
 VECTORS = WIDTH // LANES  # vectors per activation row
-PHOTONS = 4  # photons a micro-kernel block carries: PHOTONS × VECTORS accumulators
+PHOTONS = 4 if LANES == 16 else 2  # photons a micro-kernel block carries: PHOTONS × VECTORS
 TILE = 128  # photons carried through the layers together (activations 16 KiB, in L1)
 TARGET = "dpm_kernelnet_radiance"
 ROW = 16  # floats of a photon row (`infer.PhotonTable`)
