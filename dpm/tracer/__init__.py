@@ -45,17 +45,27 @@ def build_bvh(scene: Scene | np.ndarray) -> BVH:
 def _rays(
     origins: np.ndarray, directions: np.ndarray, tmax: float | np.ndarray | None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    o = np.ascontiguousarray(origins, dtype=np.float64).reshape(-1, 3)
-    d = np.ascontiguousarray(directions, dtype=np.float64).reshape(-1, 3)
+    """Rays as the batch kernels take them: (R, 3) C-contiguous, both float32 (kept as given,
+    not copied) or both float64, and tmax (R,) or (1,) float64."""
+    o, d = np.asarray(origins), np.asarray(directions)
+    dtype = np.float32 if o.dtype == d.dtype == np.float32 else np.float64
+    o = np.ascontiguousarray(o, dtype=dtype).reshape(-1, 3)
+    d = np.ascontiguousarray(d, dtype=dtype).reshape(-1, 3)
     if o.shape != d.shape:
         raise ValueError(f"origins {o.shape} and directions {d.shape} differ in shape")
-    # cheap tests first (one sum, one count); the row-wise ones run only when they fire
-    if not np.isfinite(o.sum() + d.sum()) and not (np.isfinite(o).all() and np.isfinite(d).all()):
+    if tmax is None or np.ndim(tmax) == 0:
+        t = np.full(1, np.inf if tmax is None else tmax, np.float64)
+    else:
+        t = np.ascontiguousarray(np.broadcast_to(tmax, (len(o),)), dtype=np.float64)
+    return o, d, t
+
+
+def _check(flags: int) -> None:
+    """Raise for the `traverse._ray_flags` a batch kernel returned (its results are void)."""
+    if flags & 1:
         raise ValueError("ray origins and directions must be finite")
-    if np.count_nonzero(d == 0) and np.any(np.all(d == 0, axis=1)):
+    if flags & 2:
         raise ValueError("ray directions must be non-zero")
-    t = np.full(len(o), np.inf) if tmax is None else np.broadcast_to(tmax, (len(o),))
-    return o, d, np.ascontiguousarray(t, dtype=np.float64)
 
 
 def intersect(
@@ -71,7 +81,7 @@ def intersect(
     o, d, tm = _rays(origins, directions, tmax)
     t = np.empty(len(o))
     tri = np.empty(len(o), np.int32)
-    closest_hit_batch(bvh.arrays, bvh.depth, o, d, tm, t, tri)
+    _check(closest_hit_batch(bvh.arrays, bvh.depth, o, d, tm, t, tri))
     return t, tri
 
 
@@ -84,7 +94,7 @@ def occluded(
     """(R,) bool: whether each ray hits any triangle with 0 < t < tmax."""
     o, d, tm = _rays(origins, directions, tmax)
     out = np.empty(len(o), np.bool_)
-    any_hit_batch(bvh.arrays, bvh.depth, o, d, tm, out)
+    _check(any_hit_batch(bvh.arrays, bvh.depth, o, d, tm, out))
     return out
 
 
@@ -99,5 +109,5 @@ def intersect_brute_force(
     verts = np.ascontiguousarray(triangles, dtype=np.float32).reshape(-1, 9)
     t = np.empty(len(o))
     tri = np.empty(len(o), np.int32)
-    brute_force_batch(verts, o, d, tm, t, tri)
+    _check(brute_force_batch(verts, o, d, tm, t, tri))
     return t, tri

@@ -18,14 +18,18 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 from llvmlite import ir
-from numba.core import types
+from numba.core import cgutils, types
 from numba.extending import intrinsic
 
 from dpm.scene import Scene
 from dpm.tracer.bvh import LEAF_BITS, REFS, WIDTH
 
-# pbrt's robust-slab factor 1 + 2·γ(3) for float64, so box tests never cull a true hit.
-_SLAB_SCALE = 1.0 + 2.0 * (3 * 2.0**-53) / (1 - 3 * 2.0**-53)
+# Box tests run in float32 (8 lanes: half the work of float64 and no conversions of the
+# float32 boxes) and are made conservative instead of exact: the near planes use the ray's
+# inverse direction shrunk by 1 - _SHRINK, the far ones grown by 1 + _SHRINK (which swamps
+# every float32 rounding, 2^-24 relative), and the origin's term o·inv is rounded outwards.
+_SHRINK = 2.0**-18
+_ROUND_SLACK = 2.0**-23  # float64 → float32 roundings that must go one way: twice their error
 # Boxes are entered up to this factor beyond the nearest hit so far: two triangles sharing an
 # edge can give distances a few ulps apart for the same point, and the nearer one must still be
 # found however the boxes split them, so the BVH returns the brute-force minimum.
@@ -91,61 +95,63 @@ def _cast(context, builder, sig, args, which, to):
 
 
 def _box_test_codegen(context, builder, sig, args):
-    """LLVM IR of `_box_test`: the slab test of `_slab` on WIDTH float64 lanes at once."""
+    """LLVM IR of `_box_test`: `hit_box` on WIDTH float32 lanes at once."""
     offsets = _cast(context, builder, sig, args, range(2, 8), types.int64)
-    ox, oy, oz, ix, iy, iz, tmax = _cast(context, builder, sig, args, range(8, 15), types.float64)
-    f32, f64, i8, i32, i64 = (ir.FloatType(), ir.DoubleType()) + tuple(map(ir.IntType, (8, 32, 64)))
-    vf32, vf64 = ir.VectorType(f32, WIDTH), ir.VectorType(f64, WIDTH)
+    f32, i8, i32, i64 = ir.FloatType(), *map(ir.IntType, (8, 32, 64))
+    vf32 = ir.VectorType(f32, WIDTH)
     array = context.make_array(sig.args[0])(context, builder, args[0])
     row_bytes = builder.extract_value(array.strides, 0)
     node = context.cast(builder, args[1], sig.args[1], types.int64)
     row = builder.gep(builder.bitcast(array.data, i8.as_pointer()), [builder.mul(node, row_bytes)])
     row = builder.bitcast(row, f32.as_pointer())
+    ray, tmax = args[8], args[9]
+    # llvmlite's fma helpers take scalars only: declare the vector intrinsic by its name
+    fma = cgutils.get_or_insert_function(
+        builder.module, ir.FunctionType(vf32, [vf32] * 3), f"llvm.fma.v{WIDTH}f32"
+    )
 
     def splat(x):
-        v = builder.insert_element(ir.Constant(vf64, ir.Undefined), x, ir.Constant(i32, 0))
+        v = builder.insert_element(ir.Constant(vf32, ir.Undefined), x, ir.Constant(i32, 0))
         return builder.shuffle_vector(v, v, ir.Constant(ir.VectorType(i32, WIDTH), [0] * WIDTH))
 
-    def plane(column, o, inv):
+    def plane(column, scale, term):
         ptr = builder.bitcast(builder.gep(row, [column]), vf32.as_pointer())
-        x = builder.fpext(builder.load(ptr, align=4), vf64)
-        return builder.fmul(builder.fsub(x, splat(o)), splat(inv))
+        scale, term = builder.extract_value(ray, scale), builder.extract_value(ray, term)
+        x = builder.load(ptr, align=4)
+        return builder.call(fma, [x, splat(scale), builder.fneg(splat(term))])
 
-    t0 = ir.Constant(vf64, [0.0] * WIDTH)
+    t0 = ir.Constant(vf32, [0.0] * WIDTH)
     t1 = splat(tmax)
-    scale = ir.Constant(vf64, [_SLAB_SCALE] * WIDTH)
-    axes = zip(offsets[:3], offsets[3:], (ox, oy, oz), (ix, iy, iz), strict=True)
-    for near_col, far_col, o, inv in axes:
-        near = plane(near_col, o, inv)
-        far = builder.fmul(plane(far_col, o, inv), scale)
-        # Compare-and-select like `_slab`: a NaN bound leaves the interval alone.
+    for axis in range(3):
+        near = plane(offsets[axis], 4 * axis, 4 * axis + 1)
+        far = plane(offsets[3 + axis], 4 * axis + 2, 4 * axis + 3)
+        # Compare-and-select like `hit_box`: a NaN bound leaves the interval alone.
         t0 = builder.select(builder.fcmp_ordered(">", near, t0), near, t0)
         t1 = builder.select(builder.fcmp_ordered("<", far, t1), far, t1)
     hit = builder.fcmp_ordered("<=", t0, t1)
     # The entry distances go to memory, not into a tuple: reading a tuple at a lane index
     # known only at run time compiles to jump tables, whose mispredictions cost more.
-    vi64 = ir.VectorType(i64, WIDTH)
-    scratch = context.make_array(sig.args[15])(context, builder, args[15])
+    vi32, vi64 = ir.VectorType(i32, WIDTH), ir.VectorType(i64, WIDTH)
+    scratch = context.make_array(sig.args[10])(context, builder, args[10])
     rows = builder.extract_value(scratch.shape, 0)
     first = builder.mul(builder.sub(rows, ir.Constant(i64, WIDTH // 2)), ir.Constant(i64, 2))
     out = builder.bitcast(builder.gep(scratch.data, [first]), vi64.as_pointer())
-    builder.store(builder.bitcast(t0, vi64), out, align=8)
+    builder.store(builder.zext(builder.bitcast(t0, vi32), vi64), out, align=8)
     return builder.zext(builder.bitcast(hit, ir.IntType(WIDTH)), i64)
 
 
 @intrinsic
-def _box_test(
-    typingctx, bounds, node, nx, ny, nz, fx, fy, fz, ox, oy, oz, ix, iy, iz, tmax, stack
-):  # fmt: skip
-    """Which child boxes of a node record the ray enters before tmax (bit c for child c); the
-    bits of each entry distance (`_bits`; valid if entered) go to `_entry(stack, c)`.
+def _box_test(typingctx, bounds, node, nx, ny, nz, fx, fy, fz, ray, tmax, stack):
+    """Which child boxes of a node record the ray enters before float32 tmax (bit c for
+    child c); the bits of each entry distance (`_bits32`; valid if entered) go to
+    `_entry(stack, c)`.
 
     Columns nx, ny, nz of the node record hold the WIDTH near planes of each axis for the ray
     (the min planes where the direction is positive, the max planes where negative) and
-    fx, fy, fz the far ones. Per lane this is exactly `hit_box`, with the same float64
-    operations in the same order.
+    fx, fy, fz the far ones; `ray` is its `box_constants`. Per lane this is exactly
+    `hit_box`, with the same float32 operations in the same order.
     """
-    sig = types.int64(bounds, node, nx, ny, nz, fx, fy, fz, ox, oy, oz, ix, iy, iz, tmax, stack)
+    sig = types.int64(bounds, node, nx, ny, nz, fx, fy, fz, ray, tmax, stack)
     return sig, _box_test_codegen
 
 
@@ -237,13 +243,23 @@ def _leaf_test(typingctx, planes, first, count, kx, ky, kz, okx, oky, okz, sx, s
 
 
 @intrinsic
-def _bits(typingctx, x):
-    """The IEEE bits of float64 x as an int64: for x ≥ 0 (and +inf) they order as x does."""
+def _bits32(typingctx, x):
+    """The IEEE bits of float32 x as an int64: for x ≥ 0 (and +inf) they order as x does."""
 
     def codegen(context, builder, sig, args):
-        return builder.bitcast(args[0], ir.IntType(64))
+        return builder.zext(builder.bitcast(args[0], ir.IntType(32)), ir.IntType(64))
 
-    return types.int64(types.float64), codegen
+    return types.int64(types.float32), codegen
+
+
+@intrinsic
+def _fma32(typingctx, a, b, c):
+    """a·b + c of float32s with one rounding (the lanes of `_box_test` do the same)."""
+
+    def codegen(context, builder, sig, args):
+        return builder.fma(*args)
+
+    return types.float32(types.float32, types.float32, types.float32), codegen
 
 
 @intrinsic
@@ -256,33 +272,64 @@ def _lowest_bit(typingctx, mask):
     return types.int64(types.int64), codegen
 
 
-@nb.njit(cache=True, inline="always")
-def _slab(lo, hi, o, inv, t0, t1):
-    """Clip the interval (t0, t1) by one axis' slab [lo, hi].
-
-    Written with comparisons, not min/max, so a NaN bound (a ray lying in a box face, where
-    0·inf appears) leaves the interval alone rather than turning into a miss. The near and far
-    planes are chosen by the sign of inv (inv = ±inf for a zero direction component, -inf for
-    -0.0), never by comparing the two distances, which a NaN would defeat.
-    """
-    if inv < 0:
-        lo, hi = hi, lo
-    near = (lo - o) * inv
-    far = (hi - o) * inv
-    if near > t0:
-        t0 = near
-    if far * _SLAB_SCALE < t1:
-        t1 = far * _SLAB_SCALE
-    return t0, t1
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _float32_up(x):
+    """A float32 ≥ float64 x, within 2^-22 of it (+ 1e-37); NaN stays NaN. (Rounding to
+    nearest moves x by at most 2^-24 of itself; np.nextafter would be exact but is a libm
+    call, and this runs several times a ray.)"""
+    return np.float32(x + _ROUND_SLACK * abs(x) + 1e-37)
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
-def hit_box(lo, hi, ox, oy, oz, ix, iy, iz, tmax):
-    """Entry distance into the box [lo, hi] (two 3-sequences) if entered before tmax, else inf."""
-    t0, t1 = _slab(lo[0], hi[0], ox, ix, 0.0, tmax)
-    t0, t1 = _slab(lo[1], hi[1], oy, iy, t0, t1)
-    t0, t1 = _slab(lo[2], hi[2], oz, iz, t0, t1)
-    return t0 if t0 <= t1 else np.inf
+def _float32_down(x):
+    """A float32 ≤ float64 x, within 2^-22 of it (- 1e-37); NaN stays NaN."""
+    return np.float32(x - _ROUND_SLACK * abs(x) - 1e-37)
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def box_constants(ox, oy, oz, ix, iy, iz):
+    """12 float32 constants of the box test of the ray from o with inverse direction i: per
+    axis (near scale, near term, far scale, far term). A plane at coordinate x is crossed at
+    fma(x, scale, -term); near planes use (i·(1 - _SHRINK), o·scale rounded up), far planes
+    (i·(1 + _SHRINK), o·scale rounded down).
+
+    With these, a box the ray enters at a (real) distance in [0, tmax] is always entered, at
+    a distance no greater: the scales move the true distance (x - o)·i inwards by 2^-18 of
+    itself, more than the fma's rounding moves it out, and the terms' rounding only moves
+    near planes nearer and far planes farther. A zero direction component gives inf scales;
+    the NaNs of inf - inf then leave that axis out, which only enters more boxes.
+    """
+    nx, fx = np.float32(ix * (1.0 - _SHRINK)), np.float32(ix * (1.0 + _SHRINK))
+    ny, fy = np.float32(iy * (1.0 - _SHRINK)), np.float32(iy * (1.0 + _SHRINK))
+    nz, fz = np.float32(iz * (1.0 - _SHRINK)), np.float32(iz * (1.0 + _SHRINK))
+    return (
+        nx, _float32_up(ox * np.float64(nx)), fx, _float32_down(ox * np.float64(fx)),
+        ny, _float32_up(oy * np.float64(ny)), fy, _float32_down(oy * np.float64(fy)),
+        nz, _float32_up(oz * np.float64(nz)), fz, _float32_down(oz * np.float64(fz)),
+    )  # fmt: skip
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def hit_box(lo, hi, ray, tmax):
+    """Entry distance (float32) into the box [lo, hi] (two 3-sequences of float32) of the ray
+    with `box_constants` ray, if entered before float32 tmax, else inf.
+
+    Compare-and-select, not min/max, so a NaN bound (a ray lying in a box face, or a zero
+    direction component) leaves the interval alone rather than turning into a miss. The near
+    and far planes are chosen by the sign of the scales, never by comparing the distances.
+    """
+    t0, t1 = np.float32(0.0), tmax
+    for axis in range(3):
+        a, b = np.float32(lo[axis]), np.float32(hi[axis])
+        if ray[4 * axis] < 0:
+            a, b = b, a
+        near = _fma32(a, ray[4 * axis], -ray[4 * axis + 1])
+        far = _fma32(b, ray[4 * axis + 2], -ray[4 * axis + 3])
+        if near > t0:
+            t0 = near
+        if far < t1:
+            t1 = far
+    return t0 if t0 <= t1 else np.float32(np.inf)
 
 
 @nb.njit(cache=True, inline="always")
@@ -322,13 +369,14 @@ def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     o = (origin[kx], origin[ky], origin[kz])
     ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
     nx, ny, nz, fx, fy, fz = _planes(ix, iy, iz)
+    ray = box_constants(ox, oy, oz, ix, iy, iz)
     best_t, best = tmax, -1
-    far = best_t * _CULL_SCALE
-    cull = _bits(far)
+    far = _float32_up(best_t * _CULL_SCALE)
+    cull = _bits32(far)
     ref, sp = 0, 0
     while True:
         if ref >= 0:
-            m = _box_test(bounds, ref, nx, ny, nz, fx, fy, fz, ox, oy, oz, ix, iy, iz, far, stack)
+            m = _box_test(bounds, ref, nx, ny, nz, fx, fy, fz, ray, far, stack)
             if m != 0:
                 c = _lowest_bit(m)
                 m &= m - 1
@@ -376,8 +424,8 @@ def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
                     m &= m - 1
                     if ts[c] < best_t:
                         best_t, best = ts[c], first + c
-                far = best_t * _CULL_SCALE
-                cull = _bits(far)
+                far = _float32_up(best_t * _CULL_SCALE)
+                cull = _bits32(far)
         # Pop the next subtree that may still hold a nearer hit.
         while sp > 0 and stack[sp - 1, 1] > cull:
             sp -= 1
@@ -399,13 +447,14 @@ def any_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     o = (origin[kx], origin[ky], origin[kz])
     ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
     nx, ny, nz, fx, fy, fz = _planes(ix, iy, iz)
-    far = tmax * _CULL_SCALE
+    ray = box_constants(ox, oy, oz, ix, iy, iz)
+    far = _float32_up(tmax * _CULL_SCALE)
     stack[0, 0] = 0
     sp = 1
     while sp > 0:
         sp -= 1
         node = stack[sp, 0]
-        m = _box_test(bounds, node, nx, ny, nz, fx, fy, fz, ox, oy, oz, ix, iy, iz, far, stack)
+        m = _box_test(bounds, node, nx, ny, nz, fx, fy, fz, ray, far, stack)
         while m != 0:
             c = _lowest_bit(m)
             m &= m - 1
@@ -423,46 +472,98 @@ def any_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     return False
 
 
+@nb.njit(cache=True, inline="always")
+def _ray_flags(o, d):
+    """Bit 0: origin o or direction d (3-sequences) not finite; bit 1: d is zero."""
+    flags = 0
+    for a in range(3):
+        if not (np.isfinite(o[a]) and np.isfinite(d[a])):
+            flags |= 1
+    if d[0] == 0 and d[1] == 0 and d[2] == 0:
+        flags |= 2
+    return flags
+
+
+@nb.njit(cache=True, inline="always")
+def _or_all(flags):
+    """The bitwise or of an int64 array."""
+    out = 0
+    for f in flags:
+        out |= f
+    return out
+
+
 @nb.njit(cache=True, parallel=True, error_model="numpy")
 def closest_hit_batch(bvh, depth, origins, directions, tmax, out_t, out_tri):
-    """Closest hits of rays (R, 3) into out_t (R,) float64 and out_tri (R,) int32."""
+    """Closest hits of rays (R, 3) into out_t (R,) float64 and out_tri (R,) int32, up to tmax
+    (R,) or (1,) for all. Returns `_ray_flags` of all rays or'ed; a flagged ray is not traced."""
     n = origins.shape[0]
     n_tasks = (n + RAYS_PER_TASK - 1) // RAYS_PER_TASK
+    flags = np.zeros(n_tasks, np.int64)
     for task in nb.prange(n_tasks):
         stack = new_stack(depth)
         for r in range(task * RAYS_PER_TASK, min(n, (task + 1) * RAYS_PER_TASK)):
             o, d = origins[r], directions[r]
+            bad = _ray_flags(o, d)
+            if bad:
+                flags[task] |= bad
+                out_t[r], out_tri[r] = np.inf, -1
+                continue
             out_t[r], out_tri[r] = closest_hit(
-                bvh, o[0], o[1], o[2], d[0], d[1], d[2], tmax[r], stack
-            )
+                bvh, np.float64(o[0]), np.float64(o[1]), np.float64(o[2]),
+                np.float64(d[0]), np.float64(d[1]), np.float64(d[2]),
+                tmax[r if tmax.shape[0] > 1 else 0], stack,
+            )  # fmt: skip
+    return _or_all(flags)
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
 def any_hit_batch(bvh, depth, origins, directions, tmax, out):
-    """Occlusion of rays (R, 3) within tmax (R,) into out (R,) bool."""
+    """Occlusion of rays (R, 3) within tmax (R,) or (1,) into out (R,) bool. Returns
+    `_ray_flags` of all rays or'ed; a flagged ray is not traced."""
     n = origins.shape[0]
     n_tasks = (n + RAYS_PER_TASK - 1) // RAYS_PER_TASK
+    flags = np.zeros(n_tasks, np.int64)
     for task in nb.prange(n_tasks):
         stack = new_stack(depth)
         for r in range(task * RAYS_PER_TASK, min(n, (task + 1) * RAYS_PER_TASK)):
+            o, d = origins[r], directions[r]
+            bad = _ray_flags(o, d)
+            if bad:
+                flags[task] |= bad
+                out[r] = False
+                continue
             out[r] = any_hit(
-                bvh, origins[r, 0], origins[r, 1], origins[r, 2],
-                directions[r, 0], directions[r, 1], directions[r, 2], tmax[r], stack,
+                bvh, np.float64(o[0]), np.float64(o[1]), np.float64(o[2]),
+                np.float64(d[0]), np.float64(d[1]), np.float64(d[2]),
+                tmax[r if tmax.shape[0] > 1 else 0], stack,
             )  # fmt: skip
+    return _or_all(flags)
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
 def brute_force_batch(verts, origins, directions, tmax, out_t, out_tri):
-    """Closest hits by testing every triangle of verts (T, 9): the BVH's reference."""
-    for r in nb.prange(origins.shape[0]):
+    """Closest hits by testing every triangle of verts (T, 9): the BVH's reference. Rays and
+    tmax as `closest_hit_batch`'s, and the same return value."""
+    n = origins.shape[0]
+    flags = np.zeros(n, np.int64)
+    for ray in nb.prange(n):
+        r = np.int64(ray)  # the prange index is unsigned: mixed with int64 it turns float
         o, d = origins[r], directions[r]
-        kx, ky, kz, sx, sy, sz = ray_setup(d[0], d[1], d[2])
-        best_t, best = tmax[r], -1
+        flags[r] = _ray_flags(o, d)
+        out_t[r], out_tri[r] = np.inf, -1
+        if flags[r]:
+            continue
+        ox, oy, oz = np.float64(o[0]), np.float64(o[1]), np.float64(o[2])
+        kx, ky, kz, sx, sy, sz = ray_setup(np.float64(d[0]), np.float64(d[1]), np.float64(d[2]))
+        best_t, best = tmax[r if tmax.shape[0] > 1 else 0], -1
         for i in range(verts.shape[0]):
-            t = hit_triangle(verts, i, o[0], o[1], o[2], kx, ky, kz, sx, sy, sz, best_t)
+            t = hit_triangle(verts, i, ox, oy, oz, kx, ky, kz, sx, sy, sz, best_t)
             if t < best_t:
                 best_t, best = t, i
-        out_t[r], out_tri[r] = (best_t, best) if best >= 0 else (np.inf, -1)
+        if best >= 0:
+            out_t[r], out_tri[r] = best_t, best
+    return _or_all(flags)
 
 
 def spawn_offset(scene: Scene) -> float:
