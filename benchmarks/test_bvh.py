@@ -1,9 +1,11 @@
 """BVH build time and closest-hit rays/s on the example scenes and an 82k-triangle sphere,
-side by side with Embree (embreex) on the same rays; the ratio is printed at the end."""
+side by side with Embree (embreex) on the same rays, incoherent and camera-coherent; the
+ratios are printed at the end (and saved with DPM_BENCH_SAVE=1)."""
 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 import numba
 import numpy as np
@@ -11,13 +13,16 @@ import pytest
 import trimesh
 
 from common import SCENES
-from conftest import BVH_ROWS, median_seconds
+from conftest import BVH_ROWS
 from dpm import load_scene
+from dpm.camera import framing_camera
 from dpm.tracer import build_bvh, intersect
 
 EXAMPLES = sorted(SCENES.glob("*.obj"))
 N_RAYS = {"sphere82k": 1_000_000}
 DEFAULT_RAYS = 500_000
+CAMERA_SIZE = 512  # camera rays: one per pixel of a 512 × 512 image
+ROUNDS = 5  # timed rounds per engine, alternating
 
 
 def load_triangles(name: str) -> np.ndarray:
@@ -37,52 +42,76 @@ def incoherent_rays(tri: np.ndarray, n: int, seed: int = 0) -> tuple[np.ndarray,
     return o, d
 
 
+def camera_rays(name: str, tri: np.ndarray, size: int = CAMERA_SIZE) -> tuple[np.ndarray, ...]:
+    """size² float32 primary rays through the pixel centres of the scene's camera, row after
+    row (the sphere: a camera framing it): the coherent rays a render starts with."""
+    if name == "sphere82k":
+        flat = tri.reshape(-1, 3)
+        camera = framing_camera(flat.min(0), flat.max(0), size, size)
+    else:
+        camera = load_scene(next(p for p in EXAMPLES if p.stem == name)).camera
+        camera = camera.with_resolution(size, size)
+    origin, forward, right, up = camera.basis()
+    y, x = np.mgrid[0:size, 0:size] + 0.5
+    d = forward + (2 * x / size - 1)[..., None] * right + (1 - 2 * y / size)[..., None] * up
+    d = (d / np.linalg.norm(d, axis=-1, keepdims=True)).reshape(-1, 3).astype(np.float32)
+    return np.broadcast_to(origin.astype(np.float32), d.shape).copy(), d
+
+
 NAMES = [p.stem for p in EXAMPLES] + ["sphere82k"]
+RAYS = {"incoherent": incoherent_rays, "camera": camera_rays}
 
 
-@pytest.mark.parametrize("name", NAMES)
-def test_dpm_bvh(benchmark, name: str) -> None:
-    tri = load_triangles(name)
-    build_bvh(tri)  # compile once
+def seconds(fn: Callable[[], object]) -> float:
+    """Wall seconds of one call of fn."""
     start = time.perf_counter()
-    bvh = build_bvh(tri)
-    build_s = time.perf_counter() - start
-    o, d = incoherent_rays(tri, N_RAYS.get(name, DEFAULT_RAYS))
-    trace_s = median_seconds(benchmark, lambda: intersect(bvh, o, d), rounds=5)
-    before = numba.get_num_threads()
-    numba.set_num_threads(1)
-    try:
-        start = time.perf_counter()
-        intersect(bvh, o, d)
-        one_s = time.perf_counter() - start
-    finally:
-        numba.set_num_threads(before)
-    common = {"scene": name, "triangles": len(tri), "rays": len(o), "build_s": build_s}
-    BVH_ROWS.append({**common, "engine": "dpm", "trace_s": trace_s})
-    BVH_ROWS.append({**common, "engine": "dpm-1thread", "trace_s": one_s})
+    fn()
+    return time.perf_counter() - start
 
 
+@pytest.mark.parametrize("kind", list(RAYS))
 @pytest.mark.parametrize("name", NAMES)
-def test_embree_bvh(benchmark, name: str) -> None:
+def test_bvh_against_embree(benchmark, name: str, kind: str) -> None:
+    """Build both, check they agree hit for hit, then time them in turn, round after round:
+    dpm on all Numba threads, dpm on one, Embree (one thread); medians."""
     rtcore_scene = pytest.importorskip("embreex.rtcore_scene")
     from embreex.mesh_construction import TriangleMesh
 
     tri = load_triangles(name)
-    o, d = incoherent_rays(tri, N_RAYS.get(name, DEFAULT_RAYS))
+    build_bvh(tri)  # compile once
+    dpm_build = seconds(lambda: build_bvh(tri))
+    bvh = build_bvh(tri)
+    o, d = incoherent_rays(tri, N_RAYS.get(name, DEFAULT_RAYS)) if kind == "incoherent" else (
+        camera_rays(name, tri)
+    )  # fmt: skip
+
+    def embree_scene():
+        scene = rtcore_scene.EmbreeScene()
+        TriangleMesh(scene, tri)
+        scene.run(o[:1], d[:1])  # Embree commits (builds) lazily on the first query
+        return scene
+
     start = time.perf_counter()
-    scene = rtcore_scene.EmbreeScene()
-    TriangleMesh(scene, tri)
-    scene.run(o[:1], d[:1])  # Embree commits (builds) lazily on the first query
-    build_s = time.perf_counter() - start
-    trace_s = median_seconds(benchmark, lambda: scene.run(o, d, output=1), rounds=5)
+    scene = embree_scene()
+    embree_build = time.perf_counter() - start
     hits = scene.run(o, d, output=1)
-    # Same rays, independent tracer: hit/miss and distances must agree.
-    t, idx = intersect(build_bvh(tri), o, d)
+    t, idx = intersect(bvh, o, d)
     agree = np.mean((hits["primID"] >= 0) == (idx >= 0))
     assert agree > 0.9999, f"hit/miss agreement with Embree only {agree:.6f}"
     both = (hits["primID"] >= 0) & (idx >= 0)
     np.testing.assert_allclose(hits["tfar"][both], t[both], rtol=1e-4, atol=1e-6)
-    BVH_ROWS.append(
-        {"scene": name, "triangles": len(tri), "rays": len(o), "build_s": build_s,
-         "engine": "embree", "trace_s": trace_s}
-    )  # fmt: skip
+    threads = numba.get_num_threads()
+    times: dict[str, list[float]] = {"dpm": [], "dpm-1thread": [], "embree": []}
+    for _ in range(ROUNDS if benchmark.enabled else 1):
+        times["dpm"].append(seconds(lambda: intersect(bvh, o, d)))
+        numba.set_num_threads(1)
+        try:
+            times["dpm-1thread"].append(seconds(lambda: intersect(bvh, o, d)))
+        finally:
+            numba.set_num_threads(threads)
+        times["embree"].append(seconds(lambda: scene.run(o, d, output=1)))
+    common = {"scene": name, "kind": kind, "triangles": len(tri), "rays": len(o)}
+    for engine, runs in times.items():
+        build = embree_build if engine == "embree" else dpm_build
+        row = {**common, "engine": engine, "build_s": build, "trace_s": float(np.median(runs))}
+        BVH_ROWS.append(row)

@@ -14,6 +14,7 @@ import trimesh
 from dpm.tracer import build_bvh, intersect, intersect_brute_force, occluded
 from dpm.tracer.bvh import EMPTY, LEAF_BITS, MAX_LEAF, REFS, WIDTH
 from dpm.tracer.traverse import (
+    LEAF_LANES,
     _box_test,
     _entry,
     _leaf_test,
@@ -353,10 +354,10 @@ def test_simd_leaf_test_equals_scalar_triangle_test() -> None:
     o, d = adversarial_rays(rng, tri, 6000)
     tmax = np.where(rng.uniform(size=len(o)) < 0.5, np.inf, rng.uniform(0, 3, len(o)))
     firsts = rng.integers(0, len(tri), len(o))
-    counts = rng.integers(1, WIDTH + 1, len(o))
+    counts = rng.integers(1, LEAF_LANES + 1, len(o))
     # Half the rays aim inside (or at the rim of) one of the lanes' triangles.
     aim = np.flatnonzero(rng.uniform(size=len(o)) < 0.5)
-    lane = np.minimum(firsts[aim] + rng.integers(0, WIDTH, len(aim)), len(tri) - 1)
+    lane = np.minimum(firsts[aim] + rng.integers(0, LEAF_LANES, len(aim)), len(tri) - 1)
     target = np.einsum(
         "ni,nij->nj", rng.dirichlet([1, 1, 1], len(aim)), verts[lane].reshape(-1, 3, 3)
     )

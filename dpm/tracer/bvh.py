@@ -6,9 +6,9 @@ tested against all eight at once (`traverse._box_test`). Seen as float32, column
 WIDTH·p + c hold plane p of child c's box, planes 0–2 being min x, y, z and 3–5 max x, y, z.
 Seen as int32, column REFS + c (REFS = 6·WIDTH) is child c's reference: an interior node's
 record index (≥ 0), or for a leaf ~(first << LEAF_BITS | count), the leaf's triangles being
-rows first ... first + count - 1 of `tri_verts` (BVH order). An empty slot has an inverted box
-(min inf, max -inf) that no ray enters, and reference EMPTY. The last WIDTH columns are
-padding. Record 0 is the root.
+rows first ... first + count - 1 (count ≤ MAX_LEAF) of `tri_verts` (BVH order). An empty
+slot has an inverted box (min inf, max -inf) that no ray enters, and reference EMPTY. The
+last WIDTH columns are padding. Record 0 is the root.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import numba as nb
 import numpy as np
 
 N_BINS = 32  # SAH bins per axis; with 16, paths in the pools' wavy water took 5–9 % longer
-MAX_LEAF = 8  # a node with more triangles is always split
+MAX_LEAF = 4  # a node with more triangles is always split; a leaf is one 4-lane test
 TRAVERSAL_COST = 2.0  # SAH cost of one binary node relative to one triangle test
 WIDTH = 8  # children per node
 REFS = 6 * WIDTH  # first column of the child references (after six planes of WIDTH floats)

@@ -7,10 +7,12 @@ every call site (camera chains call it five times), and the first render compile
 minutes instead of about one and a half, for no measurable speed (a call passes only the BVH's
 arrays, the ray and the stack).
 
-Arithmetic is float64 on float32 geometry, with no fastmath: watertightness needs exact
-IEEE. Traversal tests a node's WIDTH child boxes (`_box_test`) and a leaf's up to WIDTH
+Triangle tests are float64 on float32 geometry, with no fastmath: watertightness needs exact
+IEEE. Box tests are float32 and conservative (`box_constants`): a box the ray enters is never
+missed, and its entry distance is never overestimated, so the closest hit is the brute-force
+one. Traversal tests a node's WIDTH child boxes (`_box_test`) and a leaf's up to LEAF_LANES
 triangles (`_leaf_test`) in SIMD lanes through LLVM intrinsics; each lane does exactly the
-float64 operations of the scalar `hit_box` / `hit_triangle`, in the same order.
+operations of the scalar `hit_box` / `hit_triangle`, in the same order.
 """
 
 from __future__ import annotations
@@ -22,7 +24,12 @@ from numba.core import cgutils, types
 from numba.extending import intrinsic
 
 from dpm.scene import Scene
-from dpm.tracer.bvh import LEAF_BITS, REFS, WIDTH
+from dpm.tracer.bvh import LEAF_BITS, MAX_LEAF, REFS, WIDTH
+
+# A leaf's triangles take one float64 lane each: 4 lanes fill one 256-bit register, which
+# Zen 4 runs at full rate, where 8 lanes (512 bits) take two passes; leaves hold 2-3 triangles
+# on average, so most of a 512-bit register's lanes were idle (rays/s +3-12 % with 4).
+LEAF_LANES = MAX_LEAF
 
 # Box tests run in float32 (8 lanes: half the work of float64 and no conversions of the
 # float32 boxes) and are made conservative instead of exact: the near planes use the ray's
@@ -156,14 +163,14 @@ def _box_test(typingctx, bounds, node, nx, ny, nz, fx, fy, fz, ray, tmax, stack)
 
 
 def _leaf_test_codegen(context, builder, sig, args):
-    """LLVM IR of `_leaf_test`: `hit_triangle` on WIDTH float64 lanes at once."""
+    """LLVM IR of `_leaf_test`: `hit_triangle` on LEAF_LANES float64 lanes at once."""
     planes = args[0]
     first, count, kx, ky, kz = _cast(context, builder, sig, args, range(1, 6), types.int64)
     okx, oky, okz, sx, sy, sz, tmax = _cast(
         context, builder, sig, args, range(6, 13), types.float64
     )
     f32, f64, i8, i32, i64 = (ir.FloatType(), ir.DoubleType()) + tuple(map(ir.IntType, (8, 32, 64)))
-    vf32, vf64 = ir.VectorType(f32, WIDTH), ir.VectorType(f64, WIDTH)
+    vf32, vf64 = ir.VectorType(f32, LEAF_LANES), ir.VectorType(f64, LEAF_LANES)
     array = context.make_array(sig.args[0])(context, builder, planes)
     row_bytes = builder.extract_value(array.strides, 0)
     base = builder.gep(
@@ -172,7 +179,9 @@ def _leaf_test_codegen(context, builder, sig, args):
 
     def splat(x):
         v = builder.insert_element(ir.Constant(vf64, ir.Undefined), x, ir.Constant(i32, 0))
-        return builder.shuffle_vector(v, v, ir.Constant(ir.VectorType(i32, WIDTH), [0] * WIDTH))
+        return builder.shuffle_vector(
+            v, v, ir.Constant(ir.VectorType(i32, LEAF_LANES), [0] * LEAF_LANES)
+        )
 
     def coord(vertex, k, o):
         """Lanes of (vertex coordinate k) - o, as `hit_triangle` forms a[k] = v[i, k] - o[k]."""
@@ -182,7 +191,7 @@ def _leaf_test_codegen(context, builder, sig, args):
         return builder.fsub(builder.fpext(x, vf64), splat(o))
 
     fsx, fsy, fsz, ftmax = splat(sx), splat(sy), splat(sz), splat(tmax)
-    zero = ir.Constant(vf64, [0.0] * WIDTH)
+    zero = ir.Constant(vf64, [0.0] * LEAF_LANES)
     sheared = []
     for vertex in range(3):
         ex, ey, ez = coord(vertex, kx, okx), coord(vertex, ky, oky), coord(vertex, kz, okz)
@@ -213,30 +222,30 @@ def _leaf_test_codegen(context, builder, sig, args):
     miss = builder.or_(miss, builder.and_(cmp("<", det, zero), neg))
     miss = builder.or_(miss, builder.and_(cmp(">", det, zero), pos))
     t = builder.fdiv(tscaled, det)
-    lane = ir.Constant(ir.VectorType(i64, WIDTH), list(range(WIDTH)))
+    lane = ir.Constant(ir.VectorType(i64, LEAF_LANES), list(range(LEAF_LANES)))
     counts = builder.insert_element(
-        ir.Constant(ir.VectorType(i64, WIDTH), ir.Undefined), count, ir.Constant(i32, 0)
+        ir.Constant(ir.VectorType(i64, LEAF_LANES), ir.Undefined), count, ir.Constant(i32, 0)
     )
     counts = builder.shuffle_vector(
-        counts, counts, ir.Constant(ir.VectorType(i32, WIDTH), [0] * WIDTH)
+        counts, counts, ir.Constant(ir.VectorType(i32, LEAF_LANES), [0] * LEAF_LANES)
     )
     live = builder.icmp_signed("<", lane, counts)
     hit = builder.and_(builder.and_(live, builder.not_(miss)), cmp("<", t, ftmax))
-    mask = builder.uitofp(builder.zext(builder.bitcast(hit, ir.IntType(WIDTH)), i64), f64)
-    lanes = [builder.extract_element(t, ir.Constant(i32, c)) for c in range(WIDTH)]
+    mask = builder.uitofp(builder.zext(builder.bitcast(hit, ir.IntType(LEAF_LANES)), i64), f64)
+    lanes = [builder.extract_element(t, ir.Constant(i32, c)) for c in range(LEAF_LANES)]
     return context.make_tuple(builder, sig.return_type, [mask, *lanes])
 
 
 @intrinsic
 def _leaf_test(typingctx, planes, first, count, kx, ky, kz, okx, oky, okz, sx, sy, sz, tmax):
-    """(mask, t_0, ..., t_WIDTH-1): `hit_triangle` for triangles first ... first + count - 1
-    (count ≤ WIDTH) at once, from the plane-major copy `tri_planes` of their vertices.
+    """(mask, t_0, ..., t_LEAF_LANES-1): `hit_triangle` for triangles first ... first + count - 1
+    (count ≤ LEAF_LANES) at once, from the plane-major copy `tri_planes` of their vertices.
 
     okx, oky, okz are the ray origin's coordinates kx, ky, kz. Bit j of mask (a float64
     holding a small integer) is set where triangle first + j is hit strictly before tmax, at
     distance t_j; per lane the float64 operations are those of `hit_triangle`, in its order.
     """
-    sig = types.UniTuple(types.float64, WIDTH + 1)(
+    sig = types.UniTuple(types.float64, LEAF_LANES + 1)(
         planes, first, count, kx, ky, kz, okx, oky, okz, sx, sy, sz, tmax
     )
     return sig, _leaf_test_codegen
