@@ -28,10 +28,10 @@ def pytest_terminal_summary(terminalreporter) -> None:
         f"Machine: {cpu()}, {vector_width()}, "
         f"numba threads {numba.get_num_threads()}; {datetime.date.today().isoformat()}",
         "",
-        "| scene | rays | triangles | rays traced | dpm build s | embree build s | dpm Mrays/s "
-        "| dpm 1-thread Mrays/s | embree 1-thread Mrays/s | dpm / embree | "
+        "| scene | set | rays | triangles | rays traced | dpm build s | embree build s "
+        "| dpm Mrays/s | dpm 1-thread Mrays/s | embree 1-thread Mrays/s | dpm / embree | "
         "1 thread: dpm / embree |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for scene, kind in keys:
         d, d1, e = (by.get((scene, kind, engine)) for engine in ("dpm", "dpm-1thread", "embree"))
@@ -40,7 +40,8 @@ def pytest_terminal_summary(terminalreporter) -> None:
             return row["rays"] / row["trace_s"] / 1e6 if row else float("nan")
 
         lines.append(
-            f"| {scene} | {kind} | {d['triangles']} | {d['rays']} | {d['build_s']:.4f} | "
+            f"| {scene} | {d['set']} | {kind} | {d['triangles']} | {d['rays']} | "
+            f"{d['build_s']:.4f} | "
             f"{e['build_s'] if e else float('nan'):.4f} | {rate(d):.2f} | {rate(d1):.2f} | "
             f"{rate(e):.2f} | {rate(d) / rate(e):.2f}x | {rate(d1) / rate(e):.2f}x |"
         )
@@ -55,7 +56,8 @@ def pytest_terminal_summary(terminalreporter) -> None:
             "one per pixel of the scene's camera at 512 × 512, row after row. Both engines trace "
             "the same float32 rays through their Python calls (`dpm.tracer.intersect`, "
             "embreex's `run`), in turn, 5 rounds; medians. embreex traces one ray at a time on "
-            "one thread; dpm uses all Numba threads, and one in the 1-thread column.\n\n"
+            "one thread; dpm uses all Numba threads, and one in the 1-thread column. Set: the "
+            "example scenes, or the unseen-scene set (`benchmarks/scenes/make_unseen.py`).\n\n"
             + "\n".join(lines)
             + "\n"
         )

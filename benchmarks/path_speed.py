@@ -1,6 +1,7 @@
 """Path tracing speed: dpm `pt` against Mitsuba 3 `path` (llvm_ad_rgb), in samples per second.
 
-    python benchmarks/path_speed.py [SCENE ...] [--width W] [--spp S] [--rounds R] [--quick]
+    python benchmarks/path_speed.py [SCENE ...] [--set examples|unseen] [--width W] [--spp S]
+                                    [--rounds R] [--quick]
 
 Both render the same example scene (Mitsuba's through the project's converter) at the same
 resolution and samples per pixel, with unbounded depth and Russian roulette from the same
@@ -15,13 +16,17 @@ as a sanity check (the transport is validated against Mitsuba by tests/test_mits
 
 Mitsuba's LLVM backend needs libLLVM >= 15; on AVX-512 machines LLVM 15 fails to compile
 Mitsuba's kernels ("Cannot select: fminimum"), so install a newer one (Debian: libllvm19).
-Writes benchmarks/results/path_speed.md (or --out) and prints it.
+`--set unseen` measures the unseen-scene set (`scenes/make_unseen.py`, built when missing)
+instead of the examples; its geometric mean is printed below the table.
+Writes benchmarks/results/path_speed.md (path_speed_unseen.md for the unseen set, or --out)
+and prints it.
 """
 
 from __future__ import annotations
 
 import argparse
 import datetime
+import sys
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -36,6 +41,9 @@ from dpm.renderer import RenderOptions, render
 from dpm.scene import Scene
 from dpm.tracer.path import RR_START
 from dpm.validation.mitsuba import mitsuba_scene
+
+sys.path.insert(0, str(Path(__file__).parent / "scenes"))
+from make_unseen import unseen_scenes  # noqa: E402
 
 VARIANT = "llvm_ad_rgb"
 
@@ -76,9 +84,10 @@ def mitsuba_renderer(scene: Scene, camera: Camera, spp: int) -> Callable[[int], 
     return run
 
 
-def measure(name: str, width: int, spp: int, rounds: int) -> dict:
-    """Best seconds of each renderer on one scene, alternating, and their image means."""
-    scene = load_scene(SCENES / f"{name}.obj")
+def measure(path: Path, width: int, spp: int, rounds: int) -> dict:
+    """Best seconds of each renderer on one scene (an OBJ), alternating, and image means."""
+    name = path.stem
+    scene = load_scene(path)
     camera = scene.camera.with_resolution(width, width * scene.camera.height // scene.camera.width)
     runs = {
         "dpm": dpm_renderer(scene, camera, spp),
@@ -102,7 +111,7 @@ def measure(name: str, width: int, spp: int, rounds: int) -> dict:
     }  # fmt: skip
 
 
-def report(records: list[dict], rounds: int) -> str:
+def report(records: list[dict], rounds: int, command: str) -> str:
     """The Markdown report."""
     import drjit as dr
 
@@ -116,13 +125,17 @@ def report(records: list[dict], rounds: int) -> str:
     lines = [
         "# Path tracing speed: dpm `pt` vs Mitsuba 3 `path`",
         "",
-        f"Made by `python benchmarks/path_speed.py` (see its docstring): best of {rounds}"
+        f"Made by `{command}` (see its docstring): best of {rounds}"
         " alternating renders each, compilation and BVH builds excluded.",
         f"Machine: {cpu()}; numba threads"
         f" {numba.get_num_threads()}, Dr.Jit threads {dr.thread_count()} (Mitsuba {VARIANT},"
         f" LLVM {'.'.join(map(str, dr.detail.llvm_version()))}); {datetime.date.today()}.",
         "",
         *markdown_table(head, rows),
+        "",
+        f"Geometric mean of dpm / Mitsuba: "
+        f"{float(np.exp(np.mean([np.log(r['ratio']) for r in records]))):.2f}x "
+        f"({len(records)} scenes).",
     ]
     return "\n".join(lines) + "\n"
 
@@ -130,21 +143,34 @@ def report(records: list[dict], rounds: int) -> str:
 def main() -> None:
     """Measure the scenes named (default: every example) and write the report."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("scenes", nargs="*", default=sorted(f.stem for f in SCENES.glob("*.obj")))
+    p.add_argument("scenes", nargs="*", help="scene names (default: the whole set)")
+    p.add_argument("--set", choices=("examples", "unseen"), default="examples")
     p.add_argument("--width", type=int, default=128)
     p.add_argument("--spp", type=int, default=64)
     p.add_argument("--rounds", type=int, default=3)
     p.add_argument("--quick", action="store_true", help="64 pixels wide, 16 spp, 1 round")
-    p.add_argument("--out", type=Path, default=RESULTS / "path_speed.md")
+    p.add_argument("--out", type=Path, help="default: results/path_speed[_unseen].md")
     args = p.parse_args()
+    if args.set == "unseen":
+        paths = {q.stem: q for q in unseen_scenes()}
+    else:
+        paths = {q.stem: q for q in sorted(SCENES.glob("*.obj"))}
+    unknown = [n for n in args.scenes if n not in paths]
+    if unknown:
+        p.error(f"not in the {args.set} set: {', '.join(unknown)}")
+    out = args.out or RESULTS / (
+        "path_speed.md" if args.set == "examples" else "path_speed_unseen.md"
+    )
     if args.quick:
         args.width, args.spp, args.rounds = 64, 16, 1
     records = []
-    for name in args.scenes:
-        records.append(measure(name, args.width, args.spp, args.rounds))
+    for name in args.scenes or list(paths):
+        records.append(measure(paths[name], args.width, args.spp, args.rounds))
         print(name, {k: v for k, v in records[-1].items() if k != "scene"}, flush=True)
-    text = report(records, args.rounds)
-    args.out.write_text(text)
+    text = report(
+        records, args.rounds, " ".join(["python", "benchmarks/path_speed.py", *sys.argv[1:]])
+    )
+    out.write_text(text)
     print(text)
 
 

@@ -1,11 +1,14 @@
-"""BVH build time and closest-hit rays/s on the example scenes and an 82k-triangle sphere,
-side by side with Embree (embreex) on the same rays, incoherent and camera-coherent; the
-ratios are printed at the end (and saved with DPM_BENCH_SAVE=1)."""
+"""BVH build time and closest-hit rays/s on the example scenes, an 82k-triangle sphere and the
+unseen-scene set (`scenes/make_unseen.py`), side by side with Embree (embreex) on the same
+rays, incoherent and camera-coherent; the ratios are printed at the end (and saved with
+DPM_BENCH_SAVE=1)."""
 
 from __future__ import annotations
 
+import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numba
 import numpy as np
@@ -18,7 +21,17 @@ from dpm import load_scene
 from dpm.camera import framing_camera
 from dpm.tracer import build_bvh, intersect
 
+sys.path.insert(0, str(Path(__file__).parent / "scenes"))
+from make_unseen import unseen_scenes  # noqa: E402
+
 EXAMPLES = sorted(SCENES.glob("*.obj"))
+UNSEEN = unseen_scenes()  # built on first use (git-ignored)
+PATHS = {p.stem: p for p in EXAMPLES + UNSEEN}
+SET = {
+    **{p.stem: "example" for p in EXAMPLES},
+    "sphere82k": "—",
+    **{p.stem: "unseen" for p in UNSEEN},
+}
 N_RAYS = {"sphere82k": 1_000_000}
 DEFAULT_RAYS = 500_000
 CAMERA_SIZE = 512  # camera rays: one per pixel of a 512 × 512 image
@@ -26,10 +39,11 @@ ROUNDS = 5  # timed rounds per engine, alternating
 
 
 def load_triangles(name: str) -> np.ndarray:
-    """(T, 3, 3) float32 triangles of an example scene, or the 81,920-triangle icosphere."""
+    """(T, 3, 3) float32 triangles of an example or unseen scene, or the 81,920-triangle
+    icosphere."""
     if name == "sphere82k":
         return trimesh.creation.icosphere(subdivisions=6).triangles.astype(np.float32)
-    return load_scene(next(p for p in EXAMPLES if p.stem == name)).triangles
+    return load_scene(PATHS[name]).triangles
 
 
 def incoherent_rays(tri: np.ndarray, n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -49,7 +63,7 @@ def camera_rays(name: str, tri: np.ndarray, size: int = CAMERA_SIZE) -> tuple[np
         flat = tri.reshape(-1, 3)
         camera = framing_camera(flat.min(0), flat.max(0), size, size)
     else:
-        camera = load_scene(next(p for p in EXAMPLES if p.stem == name)).camera
+        camera = load_scene(PATHS[name]).camera
         camera = camera.with_resolution(size, size)
     origin, forward, right, up = camera.basis()
     y, x = np.mgrid[0:size, 0:size] + 0.5
@@ -58,7 +72,7 @@ def camera_rays(name: str, tri: np.ndarray, size: int = CAMERA_SIZE) -> tuple[np
     return np.broadcast_to(origin.astype(np.float32), d.shape).copy(), d
 
 
-NAMES = [p.stem for p in EXAMPLES] + ["sphere82k"]
+NAMES = [p.stem for p in EXAMPLES] + ["sphere82k"] + [p.stem for p in UNSEEN]
 RAYS = {"incoherent": incoherent_rays, "camera": camera_rays}
 
 
@@ -110,7 +124,7 @@ def test_bvh_against_embree(benchmark, name: str, kind: str) -> None:
         finally:
             numba.set_num_threads(threads)
         times["embree"].append(seconds(lambda: scene.run(o, d, output=1)))
-    common = {"scene": name, "kind": kind, "triangles": len(tri), "rays": len(o)}
+    common = {"scene": name, "set": SET[name], "kind": kind, "triangles": len(tri), "rays": len(o)}
     for engine, runs in times.items():
         build = embree_build if engine == "embree" else dpm_build
         row = {**common, "engine": engine, "build_s": build, "trace_s": float(np.median(runs))}
