@@ -484,13 +484,11 @@ def any_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
 @nb.njit(cache=True, inline="always")
 def _ray_flags(o, d):
     """Bit 0: origin o or direction d (3-sequences) not finite; bit 1: d is zero."""
-    flags = 0
-    for a in range(3):
-        if not (np.isfinite(o[a]) and np.isfinite(d[a])):
-            flags |= 1
-    if d[0] == 0 and d[1] == 0 and d[2] == 0:
-        flags |= 2
-    return flags
+    # x - x is 0 for finite x and NaN for inf or NaN: one comparison for all six numbers
+    zero = (o[0] - o[0]) + (o[1] - o[1]) + (o[2] - o[2]) + (d[0] - d[0]) + (d[1] - d[1])
+    finite = zero + (d[2] - d[2]) == 0
+    still = (d[0] == 0) & (d[1] == 0) & (d[2] == 0)
+    return np.int64(not finite) | (np.int64(still) << 1)
 
 
 @nb.njit(cache=True, inline="always")
