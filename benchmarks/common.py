@@ -46,7 +46,7 @@ TOTAL = "total"  # timed_estimate's key for the wall seconds of the whole call
 
 def cpu() -> str:
     """This machine's CPU (/proc/cpuinfo's model name, family and model where there is one:
-    a virtual machine may hide the rest of the name) and cores."""
+    a virtual machine may hide the rest of the name), cores and widest vector extension."""
     info = {}
     try:
         with open("/proc/cpuinfo") as f:
@@ -57,7 +57,12 @@ def cpu() -> str:
         pass
     name = info.get("model name") or platform.processor() or platform.machine()
     model = [f"{k} {info[k]}" for k in ("cpu family", "model") if k in info]
-    return f"{name} ({'; '.join([*model, platform.machine()])}), {os.cpu_count()} cores"
+    flags = set(info.get("flags", "").split())
+    vectors = next((n for n, f in VECTORS if f in flags), "vector width unknown")
+    return f"{name} ({'; '.join([*model, platform.machine()])}), {os.cpu_count()} cores, {vectors}"
+
+
+VECTORS = (("AVX-512", "avx512f"), ("AVX2", "avx2"), ("AVX", "avx"), ("SSE2", "sse2"))
 
 
 def table_points(scene: Scene, bvh: BVH) -> VisiblePoints:

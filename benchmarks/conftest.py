@@ -25,7 +25,7 @@ def pytest_terminal_summary(terminalreporter) -> None:
     keys = list(dict.fromkeys((r["scene"], r["kind"]) for r in BVH_ROWS))
     by = {(r["scene"], r["kind"], r["engine"]): r for r in BVH_ROWS}
     lines = [
-        f"Machine: {cpu()}, {vector_width()}, "
+        f"Machine: {cpu()}, "
         f"numba threads {numba.get_num_threads()}; {datetime.date.today().isoformat()}",
         "",
         "| scene | set | rays | triangles | rays traced | dpm build s | embree build s "
@@ -61,14 +61,3 @@ def pytest_terminal_summary(terminalreporter) -> None:
             + "\n".join(lines)
             + "\n"
         )
-
-
-def vector_width() -> str:
-    """The widest vector extension of this CPU, as a phrase ("AVX-512", "AVX2", ...)."""
-    import llvmlite.binding as llvm
-
-    features = llvm.get_host_cpu_features()
-    for name, flag in (("AVX-512", "avx512f"), ("AVX2", "avx2"), ("AVX", "avx")):
-        if features.get(flag):
-            return f"{name} vectors"
-    return "SSE vectors"
