@@ -57,6 +57,8 @@ def _rays(
         t = np.full(1, np.inf if tmax is None else tmax, np.float64)
     else:
         t = np.ascontiguousarray(np.broadcast_to(tmax, (len(o),)), dtype=np.float64)
+    if np.isnan(t).any():
+        raise ValueError("tmax must not be NaN")
     return o, d, t
 
 

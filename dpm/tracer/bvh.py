@@ -25,8 +25,9 @@ TRAVERSAL_COST = 2.0  # SAH cost of one binary node relative to one triangle tes
 WIDTH = 8  # children per node
 REFS = 6 * WIDTH  # first column of the child references (after six planes of WIDTH floats)
 RECORD = 8 * WIDTH  # 4-byte columns per node record (two of padding per child)
-assert MAX_LEAF <= WIDTH  # a leaf's triangles are tested together, one per SIMD lane
 LEAF_BITS = 4  # low bits of a leaf reference that hold its triangle count (≤ MAX_LEAF)
+# A leaf's triangles are tested together, one per SIMD lane (`traverse.LEAF_LANES`).
+assert MAX_LEAF < 2**LEAF_BITS
 EMPTY = ~0  # reference of an empty child slot: a leaf of no triangles
 
 
@@ -37,7 +38,7 @@ class BVHArrays(NamedTuple):
     kids: np.ndarray  # (nodes, RECORD) int32 view of the same memory (child references)
     tri_verts: np.ndarray  # (T, 9) float32 triangle vertices v0, v1, v2 in BVH order
     tri_index: np.ndarray  # (T,) int32 scene triangle index of each BVH-order triangle
-    tri_planes: np.ndarray  # (9, T + WIDTH) float32 tri_verts transposed, zero-padded
+    tri_planes: np.ndarray  # (9, T + MAX_LEAF) float32 tri_verts transposed, zero-padded
 
 
 @dataclass(frozen=True)
@@ -273,8 +274,9 @@ def build_bvh_from_triangles(triangles: np.ndarray) -> BVH:
     nodes = _aligned(records.shape, np.int32)
     nodes[:] = records
     verts = np.ascontiguousarray(tri[order].reshape(-1, 9))
-    # Plane-major copy: a leaf's triangles are WIDTH consecutive floats per coordinate.
-    planes = _aligned((9, len(verts) + WIDTH), np.float32)
+    # Plane-major copy: a leaf's triangles are MAX_LEAF consecutive floats per coordinate
+    # (the padding: a leaf test reads MAX_LEAF lanes, however few triangles the leaf has).
+    planes = _aligned((9, len(verts) + MAX_LEAF), np.float32)
     planes[:, : len(verts)] = verts.T
     planes[:, len(verts) :] = 0.0
     arrays = BVHArrays(

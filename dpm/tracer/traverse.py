@@ -36,6 +36,10 @@ LEAF_LANES = MAX_LEAF
 # inverse direction shrunk by 1 - _SHRINK, the far ones grown by 1 + _SHRINK (which swamps
 # every float32 rounding, 2^-24 relative), and the origin's term o·inv is rounded outwards.
 _SHRINK = 2.0**-18
+_MAX_FLOAT32 = float(np.finfo(np.float32).max)
+# Below this a float32 scale is subnormal to within 2^-18 of itself: its rounding could
+# exceed the shrink (directions above about 1e32 in one component).
+_MIN_SCALE = 2.0**-126 * 2.0**18
 _ROUND_SLACK = 2.0**-23  # float64 → float32 roundings that must go one way: twice their error
 # Boxes are entered up to this factor beyond the nearest hit so far: two triangles sharing an
 # edge can give distances a few ulps apart for the same point, and the nearer one must still be
@@ -306,16 +310,31 @@ def box_constants(ox, oy, oz, ix, iy, iz):
     a distance no greater: the scales move the true distance (x - o)·i inwards by 2^-18 of
     itself, more than the fma's rounding moves it out, and the terms' rounding only moves
     near planes nearer and far planes farther. A zero direction component gives inf scales;
-    the NaNs of inf - inf then leave that axis out, which only enters more boxes.
+    the NaNs of inf - inf then leave that axis out, which only enters more boxes. An axis
+    whose scale or term float32 cannot hold to that precision (|scale| ≥ 2^128 or below
+    _MIN_SCALE, |term| ≥ 2^128) is left out the same way, with NaN constants.
     """
-    nx, fx = np.float32(ix * (1.0 - _SHRINK)), np.float32(ix * (1.0 + _SHRINK))
-    ny, fy = np.float32(iy * (1.0 - _SHRINK)), np.float32(iy * (1.0 + _SHRINK))
-    nz, fz = np.float32(iz * (1.0 - _SHRINK)), np.float32(iz * (1.0 + _SHRINK))
-    return (
-        nx, _float32_up(ox * np.float64(nx)), fx, _float32_down(ox * np.float64(fx)),
-        ny, _float32_up(oy * np.float64(ny)), fy, _float32_down(oy * np.float64(fy)),
-        nz, _float32_up(oz * np.float64(nz)), fz, _float32_down(oz * np.float64(fz)),
-    )  # fmt: skip
+    nx, cnx = _axis_constants(ox, ix, 1.0 - _SHRINK, True)
+    fx, cfx = _axis_constants(ox, ix, 1.0 + _SHRINK, False)
+    ny, cny = _axis_constants(oy, iy, 1.0 - _SHRINK, True)
+    fy, cfy = _axis_constants(oy, iy, 1.0 + _SHRINK, False)
+    nz, cnz = _axis_constants(oz, iz, 1.0 - _SHRINK, True)
+    fz, cfz = _axis_constants(oz, iz, 1.0 + _SHRINK, False)
+    return nx, cnx, fx, cfx, ny, cny, fy, cfy, nz, cnz, fz, cfz
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _axis_constants(o, inv, factor, up):
+    """(scale, term) of one axis' planes for `box_constants`: the term o·scale rounded up
+    (near planes) or down (far planes); (NaN, NaN) where float32 would lose the bound."""
+    scale = np.float32(inv * factor)
+    product = o * np.float64(scale)
+    term = _float32_up(product) if up else _float32_down(product)
+    if np.isinf(inv):  # a zero direction component: see above
+        return scale, term
+    if not (_MIN_SCALE <= abs(scale) <= _MAX_FLOAT32 and abs(term) <= _MAX_FLOAT32):
+        return np.float32(np.nan), np.float32(np.nan)
+    return scale, term
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
