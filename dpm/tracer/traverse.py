@@ -36,10 +36,11 @@ LEAF_LANES = MAX_LEAF
 # inverse direction shrunk by 1 - _SHRINK, the far ones grown by 1 + _SHRINK (which swamps
 # every float32 rounding, 2^-24 relative), and the origin's term o·inv is rounded outwards.
 _SHRINK = 2.0**-18
-_MAX_FLOAT32 = float(np.finfo(np.float32).max)
-# Below this a float32 scale is subnormal to within 2^-18 of itself: its rounding could
-# exceed the shrink (directions above about 1e32 in one component).
-_MIN_SCALE = 2.0**-126 * 2.0**18
+# An axis is left out of the box tests where float32 cannot hold its constants to 2^-18:
+# 1/d (or o/d) beyond 2^126 (float32's range, with room for the shrink and rounding), or 1/d
+# below 2^-108, where float32 is subnormal (directions above about 1e32 in one component).
+_MAX_SCALE = 2.0**126
+_MIN_SCALE = 2.0**-108
 _ROUND_SLACK = 2.0**-23  # float64 → float32 roundings that must go one way: twice their error
 # Boxes are entered up to this factor beyond the nearest hit so far: two triangles sharing an
 # edge can give distances a few ulps apart for the same point, and the nearer one must still be
@@ -54,19 +55,25 @@ RAYS_PER_TASK = 256  # rays each parallel task traces with one traversal stack
 def ray_setup(dx, dy, dz):
     """Per-ray constants of the watertight test: permuted axes and shear (Woop et al. 2013)."""
     ax, ay, az = abs(dx), abs(dy), abs(dz)
-    if ax > ay and ax > az:
-        kz = 0
-    elif ay > az:
-        kz = 1
-    else:
-        kz = 2
-    kx = (kz + 1) % 3
-    ky = (kx + 1) % 3
-    d = (dx, dy, dz)
-    if d[kz] < 0:  # keep the winding, so front faces stay front faces
-        kx, ky = ky, kx
-    inv = 1.0 / d[kz]
-    return kx, ky, kz, -d[kx] * inv, -d[ky] * inv, inv
+    # Selects, not branches: for incoherent rays the axes are random, and branches mispredict.
+    x_max = (ax > ay) & (ax > az)
+    y_max = (ay > az) & ~x_max
+    kz = np.int64(2) - 2 * np.int64(x_max) - np.int64(y_max)
+    dkz = pick(kz, dx, dy, dz)
+    flip = np.int64(dkz < 0)  # keep the winding, so front faces stay front faces
+    a = kz + 1 - 3 * np.int64(kz == 2)
+    b = a + 1 - 3 * np.int64(a == 2)
+    kx = a + flip * (b - a)
+    ky = b + flip * (a - b)
+    inv = 1.0 / dkz
+    return kx, ky, kz, -pick(kx, dx, dy, dz) * inv, -pick(ky, dx, dy, dz) * inv, inv
+
+
+@nb.njit(cache=True, inline="always")
+def pick(k, x, y, z):
+    """x, y or z for k = 0, 1 or 2. Written as selects: indexing a tuple at a run-time index
+    compiles to a jump table, whose mispredictions cost incoherent rays about 10 ns each."""
+    return x if k == 0 else (y if k == 1 else z)
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
@@ -311,30 +318,31 @@ def box_constants(ox, oy, oz, ix, iy, iz):
     itself, more than the fma's rounding moves it out, and the terms' rounding only moves
     near planes nearer and far planes farther. A zero direction component gives inf scales;
     the NaNs of inf - inf then leave that axis out, which only enters more boxes. An axis
-    whose scale or term float32 cannot hold to that precision (|scale| ≥ 2^128 or below
-    _MIN_SCALE, |term| ≥ 2^128) is left out the same way, with NaN constants.
+    whose constants float32 cannot hold to that precision (|1/d| or |o/d| above _MAX_SCALE,
+    |1/d| below _MIN_SCALE) is left out the same way, with NaN constants.
     """
-    nx, cnx = _axis_constants(ox, ix, 1.0 - _SHRINK, True)
-    fx, cfx = _axis_constants(ox, ix, 1.0 + _SHRINK, False)
-    ny, cny = _axis_constants(oy, iy, 1.0 - _SHRINK, True)
-    fy, cfy = _axis_constants(oy, iy, 1.0 + _SHRINK, False)
-    nz, cnz = _axis_constants(oz, iz, 1.0 - _SHRINK, True)
-    fz, cfz = _axis_constants(oz, iz, 1.0 + _SHRINK, False)
+    nx, cnx, fx, cfx = _axis_constants(ox, ix)
+    ny, cny, fy, cfy = _axis_constants(oy, iy)
+    nz, cnz, fz, cfz = _axis_constants(oz, iz)
     return nx, cnx, fx, cfx, ny, cny, fy, cfy, nz, cnz, fz, cfz
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
-def _axis_constants(o, inv, factor, up):
-    """(scale, term) of one axis' planes for `box_constants`: the term o·scale rounded up
-    (near planes) or down (far planes); (NaN, NaN) where float32 would lose the bound."""
-    scale = np.float32(inv * factor)
-    product = o * np.float64(scale)
-    term = _float32_up(product) if up else _float32_down(product)
-    if np.isinf(inv):  # a zero direction component: see above
-        return scale, term
-    if not (_MIN_SCALE <= abs(scale) <= _MAX_FLOAT32 and abs(term) <= _MAX_FLOAT32):
-        return np.float32(np.nan), np.float32(np.nan)
-    return scale, term
+def _axis_constants(o, inv):
+    """(near scale, near term, far scale, far term) of one axis for `box_constants`, all NaN
+    where float32 would lose the bound. Selects, not branches (this runs for every ray)."""
+    near = np.float32(inv * (1.0 - _SHRINK))
+    far = np.float32(inv * (1.0 + _SHRINK))
+    near_term = _float32_up(o * np.float64(near))
+    far_term = _float32_down(o * np.float64(far))
+    size = abs(inv)
+    keep = ((size >= _MIN_SCALE) & (size <= _MAX_SCALE) & (abs(o) * size <= _MAX_SCALE)) | (
+        size == np.inf  # a zero direction component: see above
+    )
+    nan = np.float32(np.nan)
+    if not keep:
+        near, near_term, far, far_term = nan, nan, nan, nan
+    return near, near_term, far, far_term
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
@@ -393,8 +401,7 @@ def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     """
     bounds, kids, planes = bvh.bounds, bvh.kids, bvh.tri_planes
     kx, ky, kz, sx, sy, sz = ray_setup(dx, dy, dz)
-    origin = (ox, oy, oz)
-    o = (origin[kx], origin[ky], origin[kz])
+    o = (pick(kx, ox, oy, oz), pick(ky, ox, oy, oz), pick(kz, ox, oy, oz))
     ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
     nx, ny, nz, fx, fy, fz = _planes(ix, iy, iz)
     ray = box_constants(ox, oy, oz, ix, iy, iz)
@@ -471,8 +478,7 @@ def any_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     """True if the ray hits any triangle at a distance in (0, tmax)."""
     bounds, kids, planes = bvh.bounds, bvh.kids, bvh.tri_planes
     kx, ky, kz, sx, sy, sz = ray_setup(dx, dy, dz)
-    origin = (ox, oy, oz)
-    o = (origin[kx], origin[ky], origin[kz])
+    o = (pick(kx, ox, oy, oz), pick(ky, ox, oy, oz), pick(kz, ox, oy, oz))
     ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
     nx, ny, nz, fx, fy, fz = _planes(ix, iy, iz)
     ray = box_constants(ox, oy, oz, ix, iy, iz)
