@@ -507,13 +507,22 @@ def any_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
 
 
 @nb.njit(cache=True, inline="always")
-def _ray_flags(o, d):
-    """Bit 0: origin o or direction d (3-sequences) not finite; bit 1: d is zero."""
+def _ray_flags(ox, oy, oz, dx, dy, dz):
+    """Bit 0: origin o or direction d not finite; bit 1: d is zero."""
     # x - x is 0 for finite x and NaN for inf or NaN: one comparison for all six numbers
-    zero = (o[0] - o[0]) + (o[1] - o[1]) + (o[2] - o[2]) + (d[0] - d[0]) + (d[1] - d[1])
-    finite = zero + (d[2] - d[2]) == 0
-    still = (d[0] == 0) & (d[1] == 0) & (d[2] == 0)
+    finite = (ox - ox) + (oy - oy) + (oz - oz) + (dx - dx) + (dy - dy) + (dz - dz) == 0
+    still = (dx == 0) & (dy == 0) & (dz == 0)
     return np.int64(not finite) | (np.int64(still) << 1)
+
+
+@nb.njit(cache=True, inline="always")
+def _ray(origins, directions, r):
+    """Ray r of (R, 3) arrays as six float64 scalars (no array views: in a parallel loop each
+    view would update a shared reference count)."""
+    return (
+        np.float64(origins[r, 0]), np.float64(origins[r, 1]), np.float64(origins[r, 2]),
+        np.float64(directions[r, 0]), np.float64(directions[r, 1]), np.float64(directions[r, 2]),
+    )  # fmt: skip
 
 
 @nb.njit(cache=True, inline="always")
@@ -535,17 +544,14 @@ def closest_hit_batch(bvh, depth, origins, directions, tmax, out_t, out_tri):
     for task in nb.prange(n_tasks):
         stack = new_stack(depth)
         for r in range(task * RAYS_PER_TASK, min(n, (task + 1) * RAYS_PER_TASK)):
-            o, d = origins[r], directions[r]
-            bad = _ray_flags(o, d)
+            ox, oy, oz, dx, dy, dz = _ray(origins, directions, r)
+            bad = _ray_flags(ox, oy, oz, dx, dy, dz)
             if bad:
                 flags[task] |= bad
                 out_t[r], out_tri[r] = np.inf, -1
                 continue
-            out_t[r], out_tri[r] = closest_hit(
-                bvh, np.float64(o[0]), np.float64(o[1]), np.float64(o[2]),
-                np.float64(d[0]), np.float64(d[1]), np.float64(d[2]),
-                tmax[r if tmax.shape[0] > 1 else 0], stack,
-            )  # fmt: skip
+            limit = tmax[r if tmax.shape[0] > 1 else 0]
+            out_t[r], out_tri[r] = closest_hit(bvh, ox, oy, oz, dx, dy, dz, limit, stack)
     return _or_all(flags)
 
 
@@ -559,17 +565,14 @@ def any_hit_batch(bvh, depth, origins, directions, tmax, out):
     for task in nb.prange(n_tasks):
         stack = new_stack(depth)
         for r in range(task * RAYS_PER_TASK, min(n, (task + 1) * RAYS_PER_TASK)):
-            o, d = origins[r], directions[r]
-            bad = _ray_flags(o, d)
+            ox, oy, oz, dx, dy, dz = _ray(origins, directions, r)
+            bad = _ray_flags(ox, oy, oz, dx, dy, dz)
             if bad:
                 flags[task] |= bad
                 out[r] = False
                 continue
-            out[r] = any_hit(
-                bvh, np.float64(o[0]), np.float64(o[1]), np.float64(o[2]),
-                np.float64(d[0]), np.float64(d[1]), np.float64(d[2]),
-                tmax[r if tmax.shape[0] > 1 else 0], stack,
-            )  # fmt: skip
+            limit = tmax[r if tmax.shape[0] > 1 else 0]
+            out[r] = any_hit(bvh, ox, oy, oz, dx, dy, dz, limit, stack)
     return _or_all(flags)
 
 
@@ -581,13 +584,12 @@ def brute_force_batch(verts, origins, directions, tmax, out_t, out_tri):
     flags = np.zeros(n, np.int64)
     for ray in nb.prange(n):
         r = np.int64(ray)  # the prange index is unsigned: mixed with int64 it turns float
-        o, d = origins[r], directions[r]
-        flags[r] = _ray_flags(o, d)
+        ox, oy, oz, dx, dy, dz = _ray(origins, directions, r)
+        flags[r] = _ray_flags(ox, oy, oz, dx, dy, dz)
         out_t[r], out_tri[r] = np.inf, -1
         if flags[r]:
             continue
-        ox, oy, oz = np.float64(o[0]), np.float64(o[1]), np.float64(o[2])
-        kx, ky, kz, sx, sy, sz = ray_setup(np.float64(d[0]), np.float64(d[1]), np.float64(d[2]))
+        kx, ky, kz, sx, sy, sz = ray_setup(dx, dy, dz)
         best_t, best = tmax[r if tmax.shape[0] > 1 else 0], -1
         for i in range(verts.shape[0]):
             t = hit_triangle(verts, i, ox, oy, oz, kx, ky, kz, sx, sy, sz, best_t)
