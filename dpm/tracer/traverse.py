@@ -82,15 +82,13 @@ def hit_triangle(v, i, ox, oy, oz, kx, ky, kz, sx, sy, sz, tmax):
     ax, ay, az = v[i, 0] - ox, v[i, 1] - oy, v[i, 2] - oz
     bx, by, bz = v[i, 3] - ox, v[i, 4] - oy, v[i, 5] - oz
     cx, cy, cz = v[i, 6] - ox, v[i, 7] - oy, v[i, 8] - oz
-    a = (ax, ay, az)
-    b = (bx, by, bz)
-    c = (cx, cy, cz)
-    a_x = a[kx] + sx * a[kz]
-    a_y = a[ky] + sy * a[kz]
-    b_x = b[kx] + sx * b[kz]
-    b_y = b[ky] + sy * b[kz]
-    c_x = c[kx] + sx * c[kz]
-    c_y = c[ky] + sy * c[kz]
+    a_z, b_z, c_z = pick(kz, ax, ay, az), pick(kz, bx, by, bz), pick(kz, cx, cy, cz)
+    a_x = pick(kx, ax, ay, az) + sx * a_z
+    a_y = pick(ky, ax, ay, az) + sy * a_z
+    b_x = pick(kx, bx, by, bz) + sx * b_z
+    b_y = pick(ky, bx, by, bz) + sy * b_z
+    c_x = pick(kx, cx, cy, cz) + sx * c_z
+    c_y = pick(ky, cx, cy, cz) + sy * c_z
     e0 = b_x * c_y - b_y * c_x
     e1 = c_x * a_y - c_y * a_x
     e2 = a_x * b_y - a_y * b_x
@@ -99,7 +97,7 @@ def hit_triangle(v, i, ox, oy, oz, kx, ky, kz, sx, sy, sz, tmax):
     det = e0 + e1 + e2
     if det == 0:
         return np.inf
-    tscaled = sz * (e0 * a[kz] + e1 * b[kz] + e2 * c[kz])
+    tscaled = sz * (e0 * a_z + e1 * b_z + e2 * c_z)
     if det < 0 and (tscaled >= 0 or tscaled < tmax * det):
         return np.inf
     if det > 0 and (tscaled <= 0 or tscaled > tmax * det):
