@@ -2,6 +2,12 @@
 
 from __future__ import annotations
 
+import os
+import platform
+import subprocess
+import sys
+from pathlib import Path
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -92,3 +98,33 @@ def test_the_kernel_serves_the_shipped_weights_only_where_it_applies() -> None:
     wide = random_params(128, 0)
     assert not supports(wide) and not use_fused(wide)
     assert pack_params(random_params(32, 1)).shape == (PACKED,)
+
+
+# Haswell's features without AVX-512: what an AVX2-only host compiles for
+AVX2 = ",".join(
+    ["+64bit", "+avx", "+avx2", "+fma", "+sse", "+sse2", "+sse3", "+ssse3", "+sse4.1", "+sse4.2",
+     "+popcnt", "+bmi", "+bmi2", "+f16c", "+lzcnt", "+movbe", "+cx16", "+xsave", "-avx512f",
+     "-avx512bw", "-avx512dq", "-avx512vl", "-avx512cd"]
+)  # fmt: skip
+
+
+@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="x86 vector widths")
+def test_fused_kernel_on_avx2_code(tmp_path) -> None:
+    """Compiled for an AVX2-only CPU (8-float vectors, 2-photon blocks), the kernel still
+    equals the flat matmuls: the variant AVX2 hosts run, which this host would not test."""
+    if "avx2" not in open("/proc/cpuinfo").read():
+        pytest.skip("this CPU cannot run AVX2 code")
+    script = (
+        "from dpm.nn import fused\n"
+        "assert (fused.LANES, fused.PHOTONS) == (8, 2), (fused.LANES, fused.PHOTONS)\n"
+        "import test_fused\n"
+        "for n, k in [(5, 50), (3, 7), (1, 500), (2, 1)]:\n"
+        "    test_fused.test_fused_kernel_equals_the_flat_matmuls(n, k)\n"
+    )
+    env = {**os.environ, "NUMBA_CPU_NAME": "haswell", "NUMBA_CPU_FEATURES": AVX2,
+           "NUMBA_CACHE_DIR": str(tmp_path)}  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, "-c", script], cwd=Path(__file__).parent, env=env,
+        capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr[-2000:]
