@@ -37,7 +37,7 @@ from equal_time import dpm_run
 sys.path.insert(0, str(Path(__file__).parent / "scenes"))
 from make_unseen import CONTROLS, UNSEEN, unit_scale, unseen_scenes  # noqa: E402
 
-from common import RESULTS, cpu, markdown_table  # noqa: E402
+from common import RESULTS, cpu, geomean, markdown_table  # noqa: E402
 from dpm import load_scene  # noqa: E402
 from dpm.metrics import rmse  # noqa: E402
 from dpm.options import RenderOptions  # noqa: E402
@@ -115,11 +115,6 @@ def equal_time(name: str, times: list[float], seeds: list[int]) -> list[dict]:
                   f"({row['plain_passes']:.0f}) ratio {row['network'] / row['plain']:.3f}",
                   flush=True)  # fmt: skip
     return rows
-
-
-def geomean(values: list[float]) -> float:
-    """Geometric mean."""
-    return float(np.exp(np.mean(np.log(values))))
 
 
 def corrected(row: dict) -> float:

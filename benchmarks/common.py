@@ -65,6 +65,11 @@ def cpu() -> str:
 VECTORS = (("AVX-512", "avx512f"), ("AVX2", "avx2"), ("AVX", "avx"), ("SSE2", "sse2"))
 
 
+def geomean(values) -> float:
+    """Geometric mean of positive values (NaN for none)."""
+    return float(np.exp(np.mean(np.log(values)))) if len(values) else float("nan")
+
+
 def table_points(scene: Scene, bvh: BVH) -> VisiblePoints:
     """The table's visible points: one per pixel of a WIDTH-wide image, seed 0."""
     camera = scene.camera.with_resolution(WIDTH, WIDTH * scene.camera.height // scene.camera.width)

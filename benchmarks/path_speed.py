@@ -34,7 +34,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from common import RESULTS, SCENES, cpu, markdown_table, timed
+from common import RESULTS, SCENES, cpu, geomean, markdown_table, timed
 from dpm import load_scene
 from dpm.camera import Camera
 from dpm.renderer import RenderOptions, render
@@ -134,7 +134,7 @@ def report(records: list[dict], rounds: int, command: str) -> str:
         *markdown_table(head, rows),
         "",
         f"Geometric mean of dpm / Mitsuba: "
-        f"{float(np.exp(np.mean([np.log(r['ratio']) for r in records]))):.2f}x "
+        f"{geomean([r['ratio'] for r in records]):.2f}x "
         f"({len(records)} scenes).",
     ]
     return "\n".join(lines) + "\n"

@@ -40,7 +40,16 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).parent / "scenes"))
 from make_unseen import unseen_scenes  # noqa: E402
 
-from common import RESULTS, SCENES, M, cpu, load_reference, markdown_table, table_points  # noqa: E402
+from common import (  # noqa: E402
+    RESULTS,
+    SCENES,
+    M,
+    cpu,
+    geomean,
+    load_reference,
+    markdown_table,
+    table_points,
+)
 from dpm import load_scene  # noqa: E402
 from dpm.estimators.reference import caustic_rmse, ppm_reference  # noqa: E402
 from dpm.estimators.tuning import best, tune_widening  # noqa: E402
@@ -202,11 +211,6 @@ def ratios(records: list[dict]) -> dict[str, list[float]]:
                 own = row["best"][m]["rmse"] if m in TUNED else classic
                 out[m].append(row["default"][m] / own)
     return out
-
-
-def geomean(values: list[float]) -> float:
-    """Geometric mean (NaN for none)."""
-    return float(np.exp(np.mean(np.log(values)))) if values else float("nan")
 
 
 def markdown() -> str:

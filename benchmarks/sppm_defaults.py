@@ -37,7 +37,7 @@ from caustic_references import EXAMPLES, load_reference, size
 sys.path.insert(0, str(Path(__file__).parent / "scenes"))
 from make_unseen import CONTROLS, UNSEEN, unit_scale  # noqa: E402
 
-from common import RESULTS, M, cpu, markdown_table  # noqa: E402
+from common import RESULTS, M, cpu, geomean, markdown_table  # noqa: E402
 from dpm import load_scene  # noqa: E402
 from dpm.camera import Camera  # noqa: E402
 from dpm.estimators.sppm import default_paths_per_pass, sppm_caustics_at_radii  # noqa: E402
@@ -185,7 +185,7 @@ def markdown() -> str:
         head = ["scene", "paths", "caustic photons", "ref. noise", "default passes", "default",
                 "best", "best setting", "default / best"]  # fmt: skip
         machines = "; ".join(sorted({r["machine"] for r in records}))  # RMSE: any will do
-        geo = float(np.exp(np.mean(np.log(ratios))))
+        geo = geomean(ratios)
         lines += ["", f"## {set_} ({machines})", "", *markdown_table(head, rows), "",
                   f"- sppm: geometric mean {geo:.2f}, worst {max(ratios):.2f} "
                   f"({len(ratios)} rows)"]  # fmt: skip
