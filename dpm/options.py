@@ -50,8 +50,9 @@ class RenderOptions:
     )  # fmt: skip
     radius: float | None = _option(
         None, "initial gather radius, scene units", scoped=True,
-        default_text="each point's own: the distance to its 8th nearest photon of the first pass,"
-        " at most 4 pixel widths; auto: 2 pixel widths",
+        default_text="each point's own, from its pixel width w and the distance r8 to its 8th"
+        " nearest photon of the first pass: r8^(1/3)·w^(2/3), at most 4 pixel widths; auto: 2"
+        " pixel widths",
     )  # fmt: skip
     time: float | None = _option(
         None, "render in passes until this many seconds of wall time (from the process start)",

@@ -212,6 +212,37 @@ def test_fast_inference_equals_the_flax_module_point_by_point(
     np.testing.assert_allclose(fast, plain, rtol=1e-4, atol=1e-6 * np.abs(plain).max())
 
 
+@pytest.mark.parametrize("fused", [True, False])
+def test_the_estimate_is_linear_in_the_lights_power(fused: bool, monkeypatch) -> None:
+    """Every photon c times brighter (every light c times brighter, or a scene scaled by
+    √c with its radiance kept) gives c times the estimate, at 10⁻⁴ and 10⁴ as at 1: the
+    features see each photon's power relative to its map's (`feature_paths`), and Eq. 2 is
+    linear in the stored flux. With the paper's absolute power the kernels changed."""
+    monkeypatch.setattr("dpm.nn.infer.FUSED", fused)
+    photons = plane_photons(3000, 12)
+    rng = np.random.default_rng(13)
+    n = 120
+    position = np.c_[rng.random(n), np.zeros(n), rng.random(n)].astype(np.float32)
+    normal = np.tile(np.float32([0, 1, 0]), (n, 1))
+    albedo = rng.uniform(0.2, 0.9, (n, 3)).astype(np.float32)
+    model = make_model("dpm", 32)
+    params = random_params(model, 14)
+    predict = make_query_predict(model)
+    base = predict_points(predict, params, photons, position, normal, albedo, K)
+    assert np.abs(base).max() > 0
+    for c in (1e-4, 1e4):
+        bright = replace(photons, flux=photons.flux * np.float32(c))
+        out = predict_points(predict, params, bright, position, normal, albedo, K)
+        np.testing.assert_allclose(out / c, base, rtol=2e-4, atol=1e-6 * np.abs(base).max())
+    # the Batch path (training's) sees the same inputs too
+    b1 = next(neighbourhoods(photons, position, normal, albedo, K))[1]
+    b2 = next(neighbourhoods(replace(photons, flux=photons.flux * np.float32(1e4)), position,
+                             normal, albedo, K))[1]  # fmt: skip
+    np.testing.assert_allclose(
+        b2.flux * b2.n_paths[:, None, None], b1.flux * b1.n_paths[:, None, None], rtol=1e-5
+    )
+
+
 def test_a_fresh_network_is_the_uniform_kernel() -> None:
     """The kernel predictor's last layer starts at zero: weights 1, i.e. PM (Eq. 1)."""
     photons = plane_photons(4000, 3)

@@ -3,10 +3,13 @@
 Each visible point's K nearest photons become a (K, 9) array: positions in the point's local
 frame divided by the bandwidth r (the K-th neighbour's distance), directions in the same frame,
 and flux mapped by t_a (Eq. 3) to [-1, 1]. The flux the network sees is the photon's power
-before the division by N (flux × N), so changing N with the stored flux scaled to match
-changes nothing. The estimate is L = ρ/π · Σ wᵢ Φᵢ / (π r²) with the stored flux Φᵢ (already
-÷ N): Eq. 2 with the Lambertian BRDF ρ/π written out, so that wᵢ = 1 is the uniform kernel
-(PM, Eq. 1) and the radiance agrees with every other estimator's.
+relative to its map's median photon power, times the training set's typical power (flux ×
+`dpm.nn.infer.feature_paths`, the paper's flux × N rescaled): changing N with the stored flux
+scaled to match changes nothing, and neither does making every light brighter or the scene
+larger (the paper's absolute power did: the image was not linear in the light). The estimate
+is L = ρ/π · Σ wᵢ Φᵢ / (π r²) with the stored flux Φᵢ (already ÷ N): Eq. 2 with the
+Lambertian BRDF ρ/π written out, so that wᵢ = 1 is the uniform kernel (PM, Eq. 1) and the
+radiance agrees with every other estimator's.
 All functions here are pure JAX on one point; callers `vmap` them. The tangents are turned
 at random about the normal in training and towards the neighbours' mean offset at inference
 (`canonical_angle`), so that the estimate is invariant to rotations about the normal.
@@ -76,7 +79,8 @@ def features(
 ) -> jnp.ndarray:
     """(K, 9) network input of one point from photon offsets x_i - x (K, 3, scene units),
     unit directions (K, 3), stored flux (K, 3, W ÷ N), the point's normal (3,), bandwidth r,
-    N emitted paths and the tangent rotation angle."""
+    the map's `feature_paths` n_paths (N rescaled to its power) and the tangent rotation
+    angle."""
     frame = local_frame(normal, angle)
     position = to_frame(offset, frame) / jnp.maximum(radius, MIN_RADIUS)
     return jnp.concatenate(

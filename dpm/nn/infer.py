@@ -41,6 +41,11 @@ from dpm.nn.model import SHIFT, KernelNet
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap
 
+# The photon power (W, max channel of flux × N) the flux feature puts a map's median photon at:
+# the training set's typical one (each map's median, then the median over the first 12
+# training scenes of configs' seed 0: 59; the maps' own medians span 16-86).
+REFERENCE_POWER = 59.0
+POWER_SAMPLE = 4096  # about this many photons, spread over the map, give its median power
 ACTIVATIONS_PER_CHUNK = 1 << 11  # points per chunk × K: activations (32 × this) stay in L2
 BLOCKS_IN_FLIGHT = 2  # parts of a block run at once: one's serial parts overlap the other's
 FUSED = True  # render with the fused CPU kernel where it applies (`use_fused`)
@@ -58,7 +63,24 @@ class Batch(NamedTuple):
     radius: np.ndarray  # (B,) float32 bandwidth r: distance to the K-th photon
     angle: np.ndarray  # (B,) float32 tangent-frame rotation about the normal (radians; NaN:
     # the canonical angle, towards the neighbours' mean offset)
-    n_paths: np.ndarray  # (B,) float32 emitted photon paths N of the map
+    n_paths: np.ndarray  # (B,) float32 the map's `feature_paths`: N scaled to its power
+
+
+def feature_paths(photons: PhotonMap) -> float:
+    """The N by which the features multiply stored flux (÷ N): N · REFERENCE_POWER / the map's
+    median photon power, so the network sees each photon's power relative to its map's, at
+    the training set's typical scale (N where no photon carries light).
+
+    With the absolute power (the paper's t_a of flux × N) a scene whose lights are all c
+    times brighter got other kernels, and its image was not c times as bright; a scene scaled
+    by 0.01 with its radiance kept (each photon 10⁴ times dimmer) got 6x the error. Now both
+    get the same inputs, and Eq. 2, linear in the stored flux, scales the estimate.
+    """
+    power = photons.flux[:: max(1, len(photons) // POWER_SAMPLE)].max(axis=1, initial=0.0)
+    power = power[power > 0].astype(np.float64) * photons.n_paths
+    if len(power) == 0:
+        return float(photons.n_paths)
+    return float(photons.n_paths * REFERENCE_POWER / np.median(power))
 
 
 def point_radiance(model: nn.Module, params: dict, b: Batch) -> jnp.ndarray:
@@ -150,7 +172,8 @@ class PhotonTable(NamedTuple):
     """A photon map's arrays as the network reads them: one gather per photon reads a row."""
 
     rows: jnp.ndarray  # (P + 1, 16) float32: position (3), unit direction towards the source
-    # (3), stored flux (3, W ÷ N), unit normal (3), the flux feature flux_map(flux · N) (3), 0;
+    # (3), stored flux (3, W ÷ N), unit normal (3), the flux feature flux_map(flux ·
+    # `feature_paths`) (3), 0;
     # row P is zeros (a missing neighbour: its zero normal never agrees)
 
 
@@ -166,7 +189,8 @@ def photon_table(photons: PhotonMap) -> PhotonTable:
         strict=True,
     ):
         rows[:-1, columns] = values
-    rows[:-1, FLUX_FEATURE] = flux_map(jnp.asarray(photons.flux * photons.n_paths, jnp.float32))
+    power = photons.flux * np.float32(feature_paths(photons))
+    rows[:-1, FLUX_FEATURE] = flux_map(jnp.asarray(power, jnp.float32))
     return PhotonTable(jnp.asarray(rows))
 
 
@@ -180,7 +204,7 @@ class Query(NamedTuple):
     albedo: np.ndarray  # (B, 3) float32 Lambertian albedo
     radius: np.ndarray  # (B,) float32 distance to the K-th photon
     angle: np.ndarray  # (B,) float32 frame rotation (NaN: canonical), as in `Batch`
-    n_paths: np.ndarray  # (B,) float32 emitted photon paths N
+    n_paths: np.ndarray  # (B,) float32 the map's `feature_paths`
 
 
 def gathered_batch(table: PhotonTable, q: Query) -> Batch:
@@ -274,6 +298,7 @@ def neighbourhoods(
     query one tree for many calls; gathering counts as the watch's "gather"."""
     index = photon_index(photons, watch)
     photons = index.photons
+    paths = feature_paths(photons)
     angle = np.full(len(position), np.nan, np.float32) if angle is None else angle
     for rows, nb in index.nearest(position, normal, k, watch):
         here = np.asarray(position[rows], np.float64)
@@ -285,7 +310,7 @@ def neighbourhoods(
             take(photons.flux, nb.index), nb.valid,
             np.asarray(normal[rows], np.float32), np.asarray(albedo[rows], np.float32),
             radius.astype(np.float32), np.asarray(angle[rows], np.float32),
-            np.full(len(here), photons.n_paths, np.float32),
+            np.full(len(here), paths, np.float32),
         )  # fmt: skip
 
 
@@ -336,6 +361,7 @@ def predict_points(
     index = photon_index(photons, watch)
     p = index.photons
     table = photon_table(p)
+    paths = feature_paths(p)
     out = np.zeros((len(position), 3), np.float32)
     size = chunk_size(k)
 
@@ -353,7 +379,7 @@ def predict_points(
                     nb.index.astype(np.int32), hi, (here - hi).astype(np.float32),
                     np.asarray(normal[rows], np.float32), np.asarray(albedo[rows], np.float32),
                     radius.astype(np.float32), np.full(len(here), np.nan, np.float32),
-                    np.full(len(here), p.n_paths, np.float32),
+                    np.full(len(here), paths, np.float32),
                 )  # fmt: skip
                 share = -(-len(here) // BLOCKS_IN_FLIGHT)  # every worker starts on the first block
                 for first in range(0, len(here), share):
