@@ -14,11 +14,19 @@ passes; a uniformly scaled copy is scored against its scale-1 twin's, as
   without `--no-network`, alternating which runs first budget after budget (the machine's load
   falls on both); the network's seconds and share of the run, and the passes, from the stats.
 
+- the other caustic methods (`--ladder`): `dpm-render --method M --component caustic
+  --photons N` in fresh processes for M in LADDER_METHODS at their defaults otherwise (16
+  camera samples per pixel; one visible point per pixel leaves the camera's own noise
+  through glass, 4x the error of sppm on the tinted glass), for N in `--ladder` photon
+  paths: whole-process seconds and RMSE, one seed (the first of `--seeds`).
+
 RMSE (`dpm.metrics.rmse`) against the reference, the mean over `--seeds`; ratio = with the
 network / without. The reference's own noise (its halves' RMSE / 2) is recorded beside it.
 Writes results/caustic_network/unseen.json, results/caustic_network.md and
 results/caustic_network/rmse_vs_time.png (per scene, caustic RMSE against whole-process
-seconds, with and without the network).
+seconds: auto with and without the network, the best classic method at its defaults on that
+scene (chosen by its RMSE over the ladder: a choice no user can make, so it flatters the
+classics), DPM and nppm).
 """
 
 from __future__ import annotations
@@ -32,13 +40,14 @@ from pathlib import Path
 
 import numpy as np
 from caustic_references import load_reference
-from equal_time import dpm_run
+from equal_time import dpm_run, wall
 
 sys.path.insert(0, str(Path(__file__).parent / "scenes"))
 from make_unseen import CONTROLS, UNSEEN, unit_scale, unseen_scenes  # noqa: E402
 
 from common import RESULTS, cpu, geomean, markdown_table  # noqa: E402
 from dpm import load_scene  # noqa: E402
+from dpm.io import read_exr  # noqa: E402
 from dpm.metrics import rmse  # noqa: E402
 from dpm.options import RenderOptions  # noqa: E402
 from dpm.renderer import render  # noqa: E402
@@ -46,6 +55,9 @@ from dpm.renderer import render  # noqa: E402
 OUT = RESULTS / "caustic_network"
 TABLE = RESULTS / "caustic_network.md"
 MAX_WIDTH = 256  # as equal_time_unseen: the references' width
+CLASSICS = ("ppm", "appm", "cppm", "sppm")
+LADDER_METHODS = (*CLASSICS, "dpm", "nppm")
+LADDER = (175_000, 700_000, 2_800_000)  # photon paths: M/4, M, 4·M
 
 
 def scene_size(name: str) -> tuple[Path, int, int]:
@@ -117,6 +129,40 @@ def equal_time(name: str, times: list[float], seeds: list[int]) -> list[dict]:
     return rows
 
 
+def ladder(
+    name: str, photons: list[int], seed: int, methods: tuple[str, ...] = LADDER_METHODS
+) -> list[dict]:
+    """Rows of whole-process seconds and RMSE of each of `methods` at each photon count."""
+    path, w, h = scene_size(name)
+    ref, noise, _ = load_reference(unit_scale(name), w, h)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "out.exr"
+
+        def command(method: str, n: int, s: int) -> list[str]:
+            return ["dpm-render", str(path), "--method", method, "--component", "caustic",
+                    "--photons", str(n), "--width", str(w), "--height", str(h), "--seed",
+                    str(s), "-o", str(out), "--quiet"]  # fmt: skip
+
+        for method in methods:  # warm Numba's (and JAX's) caches, untimed
+            wall(command(method, min(photons), 0))
+        for n in photons:
+            for method in methods:
+                seconds = wall(command(method, n, seed))
+                row = {"scene": name, "method": method, "photons": n, "seconds": seconds,
+                       "rmse": rmse(read_exr(out), ref), "reference_noise": noise}  # fmt: skip
+                rows.append(row)
+                print(f"{name} {method} {n:,} photon paths: {row['rmse']:.5f} in "
+                      f"{seconds:.2f} s", flush=True)  # fmt: skip
+    return rows
+
+
+def best_classic(rows: list[dict], name: str) -> str:
+    """The classic method with the least geometric-mean RMSE over scene `name`'s ladder."""
+    return min(CLASSICS, key=lambda m: geomean(
+        [x["rmse"] for x in rows if x["scene"] == name and x["method"] == m]))  # fmt: skip
+
+
 def corrected(row: dict) -> float:
     """The ratio of the two sides' own errors, the reference's noise taken out of both
     (`equal_time_unseen.own_error`); NaN where either is below the noise."""
@@ -176,7 +222,51 @@ def report(record: dict) -> str:
         share = max(x["network_share"] for x in record["times"])
         lines.append(f"- the network's largest share of a run: {share:.1%}")
         lines.append("")
+    if record.get("ladder"):
+        lines += ladder_report(record)
     return "\n".join(lines)
+
+
+def ladder_report(record: dict) -> list[str]:
+    """The ladder's table: per scene and photon count, each method's RMSE and seconds, and
+    how auto at its nearest budget compares with the best of them at no more time."""
+    rows, times = record["ladder"], record["times"]
+    lines = [f"## The other caustic methods at their defaults (seed {record['ladder_seed']})",
+             "", "Whole-process seconds and RMSE at each method's defaults (16 camera samples "
+             "per pixel); `best` is the classic", "method (ppm, appm, cppm, sppm) with the least "
+             "RMSE over the scene's ladder.", ""]  # fmt: skip
+    head = ["scene", "photon paths", *LADDER_METHODS, "best"]
+    table = []
+    for name in dict.fromkeys(x["scene"] for x in rows):
+        best = best_classic(rows, name)
+        for n in sorted({x["photons"] for x in rows if x["scene"] == name}):
+            got = {x["method"]: x for x in rows if x["scene"] == name and x["photons"] == n}
+            table.append([name, f"{n:,}",
+                          *[f"{got[m]['rmse']:.4f} ({got[m]['seconds']:.1f} s)"
+                            for m in LADDER_METHODS], best])  # fmt: skip
+    lines += [*markdown_table(head, table), ""]
+    # auto against each method at no more whole-process time: the method's least RMSE among
+    # its runs that took at most auto's seconds (none: that method cannot be that fast)
+    for label, key in (("auto", "network"), ("auto --no-network", "plain")):
+        for m in ("best classic", "dpm", "nppm"):
+            q = []
+            for x in times:
+                method = best_classic(rows, x["scene"]) if m == "best classic" else m
+                runs = [
+                    r["rmse"]
+                    for r in rows
+                    if r["scene"] == x["scene"]
+                    and r["method"] == method
+                    and r["seconds"] <= x[f"{key}_s"]
+                ]
+                if runs:
+                    q.append(x[key] / min(runs))
+            if q:
+                lines.append(f"- {label} / {m} at no more time: geometric mean {geomean(q):.3f}"
+                             f" over {len(q)} rows, worst {max(q):.3f}, "
+                             f"{sum(v > 1.0 for v in q)} above 1.0")  # fmt: skip
+    lines.append("")
+    return lines
 
 
 def chart(record: dict, path: Path) -> None:
@@ -194,16 +284,26 @@ def chart(record: dict, path: Path) -> None:
         xs = [x for x in record["times"] if x["scene"] == name]
         for key, label in (("network", "auto"), ("plain", "auto --no-network")):
             ax.loglog([x[f"{key}_s"] for x in xs], [x[key] for x in xs], "o-", label=label)
+        ladder_rows = record.get("ladder", [])
+        if any(x["scene"] == name for x in ladder_rows):
+            best = best_classic(ladder_rows, name)
+            for method, label, style in ((best, "best classic", "s--"), ("dpm", "DPM", "^:"),
+                                         ("nppm", "nppm", "v:")):  # fmt: skip
+                ys = sorted((x["seconds"], x["rmse"]) for x in ladder_rows
+                            if x["scene"] == name and x["method"] == method)  # fmt: skip
+                ax.loglog(*zip(*ys, strict=True), style, ms=3, label=label)
+            ax.set_title(f"{name} (best classic: {best})", fontsize=8)
+        else:
+            ax.set_title(name, fontsize=9)
         ax.axhline(xs[0]["reference_noise"], color="grey", lw=0.8, ls=":")
-        ax.set_title(name, fontsize=9)
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-        ax.set_xticks([2, 4, 8, 16], ["2", "4", "8", "16"])
+        ax.set_xticks([1, 2, 4, 8, 16, 32], ["1", "2", "4", "8", "16", "32"])
         ax.tick_params(labelsize=7)
     for ax in list(axes.flat)[len(names) :]:
         ax.axis("off")
     axes[0, 0].legend(fontsize=7)
     fig.supxlabel("whole-process seconds")
-    fig.supylabel("caustic RMSE (dotted: the reference's noise)")
+    fig.supylabel("caustic RMSE (grey dotted: the reference's noise)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -215,6 +315,20 @@ def main() -> None:
     p.add_argument("scenes", nargs="*")
     p.add_argument("--passes", type=int, nargs="*", default=[1, 2, 4, 8, 16, 32])
     p.add_argument("--times", type=float, nargs="*", default=[2, 4, 8, 16])
+    p.add_argument(
+        "--ladder",
+        type=int,
+        nargs="*",
+        default=list(LADDER),
+        help="photon paths of the other methods' runs (none: keep the saved rows)",
+    )
+    p.add_argument(
+        "--ladder-methods",
+        nargs="+",
+        default=list(LADDER_METHODS),
+        choices=LADDER_METHODS,
+        help="rerun these; the saved rows of others stay",
+    )
     p.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
     p.add_argument("--report", action="store_true", help="rebuild the table from the record")
     a = p.parse_args()
@@ -227,7 +341,17 @@ def main() -> None:
     saved = OUT / "unseen.json"
     old = json.loads(saved.read_text()) if saved.exists() else {"passes": [], "times": []}
     record = {"cpu": cpu(), "date": str(datetime.date.today()), "seeds": a.seeds,
-              "passes": [], "times": []}  # fmt: skip
+              "passes": [], "times": [], "ladder": []}  # fmt: skip
+    if a.ladder:
+        record["ladder_seed"] = a.seeds[0]
+        rerun = {(n, m) for n in names for m in a.ladder_methods}
+        record["ladder"] = [
+            x for x in old.get("ladder", []) if (x["scene"], x["method"]) not in rerun
+        ]
+        for name in names:
+            record["ladder"] += ladder(name, a.ladder, a.seeds[0], tuple(a.ladder_methods))
+    else:
+        record["ladder"], record["ladder_seed"] = old.get("ladder", []), old.get("ladder_seed")
     for part, run in (("passes", equal_passes), ("times", equal_time)):
         values = getattr(a, part)
         if not values:  # not rerun: the saved rows stay
