@@ -108,6 +108,16 @@ def striped_photons(n: int, seed: int) -> PhotonMap:
     return photons
 
 
+def test_cppm_critical_value_is_the_chi_square_quantile() -> None:
+    """CPPM's written-out critical value is χ²'s upper quantile at its cells and significance
+    (kept out of scipy at import: `dpm.estimators.cppm`)."""
+    from scipy.special import chdtri
+
+    from dpm.estimators import cppm
+
+    assert cppm.CRITICAL == float(chdtri(cppm.CELLS - 1, cppm.SIGNIFICANCE))
+
+
 @pytest.mark.parametrize("per_pass", [10_000, 500])  # discs get ~80 or ~4 photons a pass
 def test_cppm_keeps_its_radius_where_the_density_is_flat(per_pass: int) -> None:
     """On a uniform density a disc's average is exact, so CPPM should keep (most of) its

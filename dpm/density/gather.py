@@ -14,18 +14,29 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap
 from dpm.tracer.photon_grid import NORMAL_COS
 
+if TYPE_CHECKING:
+    from scipy.spatial import cKDTree
+
 POINTS_PER_CHUNK = 1 << 14  # K-nearest queries answered at once
 PHOTONS_PER_CHUNK = 1 << 16  # photons of a pass whose points are sought at once
 SPREAD = 4.0  # points wider than this times the 90th percentile radius are searched apart
 GATHER = "gather"  # the stopwatch stage of tree building and queries
+
+
+def kd_tree(points: np.ndarray) -> cKDTree:
+    """A cKDTree over points (N, 3) float64. scipy is imported here, on the first tree: at
+    start it cost every render a tenth of a second, and a scene without caustics none."""
+    from scipy.spatial import cKDTree
+
+    return cKDTree(points)
 
 
 @dataclass(frozen=True)
@@ -68,7 +79,7 @@ class PhotonIndex:
     def __init__(self, photons: PhotonMap, watch: Stopwatch | None = None) -> None:
         self.photons = photons
         with (watch or Stopwatch())(GATHER):
-            self.tree = cKDTree(photons.position.astype(np.float64)) if len(photons) else None
+            self.tree = kd_tree(photons.position.astype(np.float64)) if len(photons) else None
 
     def __len__(self) -> int:
         return len(self.photons)
@@ -114,7 +125,7 @@ class PointIndex:
     def __init__(self, position: np.ndarray, normal: np.ndarray) -> None:
         self.position = np.asarray(position, np.float64)
         self.normal = np.asarray(normal, np.float32)
-        self.tree = cKDTree(self.position)
+        self.tree = kd_tree(self.position)
 
     def within(
         self, photons: PhotonMap, radius: np.ndarray | float, watch: Stopwatch | None = None
@@ -157,7 +168,7 @@ class PointIndex:
             reached = np.flatnonzero(near <= reach)
             if len(reached) == 0:
                 continue
-            other = cKDTree(position[reached])
+            other = kd_tree(position[reached])
             m = tree.sparse_distance_matrix(other, reach, output_type="ndarray")
             point, photon, dist = ids[m["i"]], reached[m["j"]] + start, m["v"]
             keep = (dist < radius[point]) & _agree(self.normal[point], photons.normal[photon])
@@ -166,5 +177,5 @@ class PointIndex:
             parts.append((point[keep], photon[keep], dist[keep]))
         if wide.any():
             apart = ids[wide]
-            parts += self._pairs(cKDTree(self.position[apart]), apart, radius, photons)
+            parts += self._pairs(kd_tree(self.position[apart]), apart, radius, photons)
         return parts
