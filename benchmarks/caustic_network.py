@@ -149,18 +149,24 @@ def ladder(
         for n in photons:
             for method in methods:
                 seconds = wall(command(method, n, seed))
-                row = {"scene": name, "method": method, "photons": n, "seconds": seconds,
-                       "rmse": rmse(read_exr(out), ref), "reference_noise": noise}  # fmt: skip
+                row = {"scene": name, "method": method, "photons": n, "seed": seed,
+                       "seconds": seconds, "rmse": rmse(read_exr(out), ref),
+                       "reference_noise": noise}  # fmt: skip
                 rows.append(row)
                 print(f"{name} {method} {n:,} photon paths: {row['rmse']:.5f} in "
                       f"{seconds:.2f} s", flush=True)  # fmt: skip
     return rows
 
 
-def best_classic(rows: list[dict], name: str) -> str:
-    """The classic method with the least geometric-mean RMSE over scene `name`'s ladder."""
+def best_classic(rows: list[dict], name: str) -> str | None:
+    """The classic method with the least geometric-mean RMSE over the photon counts that every
+    classic ran at on scene `name` (None: no such count)."""
+    mine = [x for x in rows if x["scene"] == name and x["method"] in CLASSICS]
+    shared = set.intersection(*({x["photons"] for x in mine if x["method"] == m} for m in CLASSICS))
+    if not shared:
+        return None
     return min(CLASSICS, key=lambda m: geomean(
-        [x["rmse"] for x in rows if x["scene"] == name and x["method"] == m]))  # fmt: skip
+        [x["rmse"] for x in mine if x["method"] == m and x["photons"] in shared]))  # fmt: skip
 
 
 def corrected(row: dict) -> float:
@@ -228,13 +234,16 @@ def report(record: dict) -> str:
 
 
 def ladder_report(record: dict) -> list[str]:
-    """The ladder's table: per scene and photon count, each method's RMSE and seconds, and
-    how auto at its nearest budget compares with the best of them at no more time."""
+    """The ladder's table: per scene and photon count, each method's RMSE and seconds; then
+    auto at each budget against the scene's best classic method, DPM and nppm, each at the
+    least RMSE of its runs that took no more time than auto."""
     rows, times = record["ladder"], record["times"]
-    lines = [f"## The other caustic methods at their defaults (seed {record['ladder_seed']})",
+    seeds = sorted({x.get("seed", record.get("ladder_seed")) for x in rows}, key=str)
+    lines = [f"## The other caustic methods at their defaults (seed {', '.join(map(str, seeds))})",
              "", "Whole-process seconds and RMSE at each method's defaults (16 camera samples "
              "per pixel); `best` is the classic", "method (ppm, appm, cppm, sppm) with the least "
-             "RMSE over the scene's ladder.", ""]  # fmt: skip
+             "RMSE over the scene's ladder, chosen against the reference (no user can).",
+             ""]  # fmt: skip
     head = ["scene", "photon paths", *LADDER_METHODS, "best"]
     table = []
     for name in dict.fromkeys(x["scene"] for x in rows):
@@ -242,11 +251,12 @@ def ladder_report(record: dict) -> list[str]:
         for n in sorted({x["photons"] for x in rows if x["scene"] == name}):
             got = {x["method"]: x for x in rows if x["scene"] == name and x["photons"] == n}
             table.append([name, f"{n:,}",
-                          *[f"{got[m]['rmse']:.4f} ({got[m]['seconds']:.1f} s)"
-                            for m in LADDER_METHODS], best])  # fmt: skip
+                          *[f"{got[m]['rmse']:.4f} ({got[m]['seconds']:.1f} s)" if m in got
+                            else "–" for m in LADDER_METHODS], best or "–"])  # fmt: skip
     lines += [*markdown_table(head, table), ""]
     # auto against each method at no more whole-process time: the method's least RMSE among
-    # its runs that took at most auto's seconds (none: that method cannot be that fast)
+    # its runs that took at most auto's seconds (none: that method cannot be that fast, and
+    # the row is counted apart)
     for label, key in (("auto", "network"), ("auto --no-network", "plain")):
         for m in ("best classic", "dpm", "nppm"):
             q = []
@@ -264,7 +274,8 @@ def ladder_report(record: dict) -> list[str]:
             if q:
                 lines.append(f"- {label} / {m} at no more time: geometric mean {geomean(q):.3f}"
                              f" over {len(q)} rows, worst {max(q):.3f}, "
-                             f"{sum(v > 1.0 for v in q)} above 1.0")  # fmt: skip
+                             f"{sum(v > 1.0 for v in q)} above 1.0; in {len(times) - len(q)} "
+                             f"rows no run of it was as fast as {label}")  # fmt: skip
     lines.append("")
     return lines
 
@@ -291,13 +302,15 @@ def chart(record: dict, path: Path) -> None:
                                          ("nppm", "nppm", "v:")):  # fmt: skip
                 ys = sorted((x["seconds"], x["rmse"]) for x in ladder_rows
                             if x["scene"] == name and x["method"] == method)  # fmt: skip
-                ax.loglog(*zip(*ys, strict=True), style, ms=3, label=label)
-            ax.set_title(f"{name} (best classic: {best})", fontsize=8)
+                if ys:
+                    ax.loglog(*zip(*ys, strict=True), style, ms=3, label=label)
+            ax.set_title(f"{name} (best classic: {best or '–'})", fontsize=8)
         else:
             ax.set_title(name, fontsize=9)
         ax.axhline(xs[0]["reference_noise"], color="grey", lw=0.8, ls=":")
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-        ax.set_xticks([1, 2, 4, 8, 16, 32], ["1", "2", "4", "8", "16", "32"])
+        ticks = [1, 2, 4, 8, 16, 32, 64, 128, 256]
+        ax.set_xticks(ticks, [str(t) for t in ticks])
         ax.tick_params(labelsize=7)
     for ax in list(axes.flat)[len(names) :]:
         ax.axis("off")
