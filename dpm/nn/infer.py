@@ -74,9 +74,13 @@ def feature_paths(photons: PhotonMap) -> float:
     With the absolute power (the paper's t_a of flux × N) a scene whose lights are all c
     times brighter got other kernels, and its image was not c times as bright; a scene scaled
     by 0.01 with its radiance kept (each photon 10⁴ times dimmer) got 6x the error. Now both
-    get the same inputs, and Eq. 2, linear in the stored flux, scales the estimate.
+    get the same inputs, and Eq. 2, linear in the stored flux, scales the estimate. The median
+    is the whole map's: photons out of view (another light's caustic) move it too.
     """
-    power = photons.flux[:: max(1, len(photons) // POWER_SAMPLE)].max(axis=1, initial=0.0)
+    flux = photons.flux
+    if len(flux) > POWER_SAMPLE:  # a fixed random sample: a stride could follow the paths
+        flux = flux[np.random.default_rng(0).integers(0, len(flux), POWER_SAMPLE)]
+    power = flux.max(axis=1, initial=0.0)
     power = power[power > 0].astype(np.float64) * photons.n_paths
     if len(power) == 0:
         return float(photons.n_paths)
