@@ -30,6 +30,7 @@ from common import RESULTS, SCENES, cpu, geomean, markdown_table
 from dpm import load_scene
 from dpm.denoise import restore_certain
 from dpm.density.base import luminance
+from dpm.filters import box_mean
 from dpm.io import read_exr
 from dpm.methods import auto
 from dpm.metrics import rmse
@@ -37,12 +38,6 @@ from dpm.renderer import RenderOptions, render
 
 EXAMPLES = ("dragon", "glass_egg", "pool1", "pool2", "red_wine", "ring", "torus")
 RULES = ("current", "denoised", "plain", "js", "js3")
-
-
-def box3(a: np.ndarray) -> np.ndarray:
-    """(H, W) mean over each pixel's 3 × 3 neighbourhood (edges repeated)."""
-    p = np.pad(a, 1, mode="edge")
-    return sum(p[i : i + a.shape[0], j : j + a.shape[1]] for i in range(3) for j in range(3)) / 9
 
 
 def blends(color: np.ndarray, denoised: np.ndarray, error: np.ndarray) -> dict[str, np.ndarray]:
@@ -53,7 +48,7 @@ def blends(color: np.ndarray, denoised: np.ndarray, error: np.ndarray) -> dict[s
         "denoised": denoised,
         "plain": color,
     }
-    for name, s2 in (("js", shift2), ("js3", box3(shift2))):
+    for name, s2 in (("js", shift2), ("js3", box_mean(shift2, 3, mode="nearest"))):
         known = np.isfinite(error)
         var = np.where(known, error, 0.0) ** 2
         keep = np.where(known, np.clip(1 - var / np.maximum(s2, 1e-30), 0, 1), 0.0)

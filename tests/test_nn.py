@@ -364,8 +364,8 @@ def test_kill_and_resume_gives_the_same_parameters(tiny: Config, monkeypatch) ->
     whole = replace(tiny, train=replace(tiny.train, steps=steps, out=tiny.train.out + "-whole"))
     cut = replace(whole, train=replace(whole.train, out=tiny.train.out + "-cut"))
     params, rows = train(whole, progress=False)
-    # Ctrl-C while the batch of step 6 is gathered (step 5 is computing): the 7th draw
-    # (validation, then steps 1 … 6); step 5's result is not kept, so 4 is the last saved
+    # Ctrl-C in the 7th draw (validation, then steps 1 … 6), on a drawing thread: the loop
+    # meets it when it needs step 6's batch, so step 5 is the last done and saved
     draw, calls = Sampler.draw, []
 
     def interrupted(self, *args):
@@ -378,7 +378,7 @@ def test_kill_and_resume_gives_the_same_parameters(tiny: Config, monkeypatch) ->
     with pytest.raises(KeyboardInterrupt):
         train(cut, progress=False)
     monkeypatch.setattr(Sampler, "draw", draw)
-    assert sorted(p.name for p in (Path(cut.train.out) / "checkpoints").iterdir()) == ["4"]
+    assert sorted(p.name for p in (Path(cut.train.out) / "checkpoints").iterdir()) == ["5"]
     assert not (Path(cut.train.out) / "model.msgpack").exists()
     resumed, resumed_rows = train(cut, progress=False)
     for a, b in zip(jax.tree.leaves(params), jax.tree.leaves(resumed), strict=True):
@@ -584,3 +584,18 @@ def test_a_caustic_filter_trains_and_the_render_reads_its_weights(tmp_path: Path
     assert weights.out_kernel.shape == (24, 101)
     rows = (tmp_path / "run" / "metrics.csv").read_text().splitlines()
     assert len(rows) == 5 and all("nan" not in r for r in rows)  # header, steps 0-3
+
+
+def test_threads_drawing_ahead_change_nothing(tiny: Config, monkeypatch) -> None:
+    import dpm.nn.train as training
+
+    runs = []
+    for threads in (1, 3):
+        monkeypatch.setattr(training, "DRAW_THREADS", threads)
+        monkeypatch.setattr(training, "DRAW_AHEAD", 2 * threads)
+        config = replace(
+            tiny, train=replace(tiny.train, steps=6, out=f"{tiny.train.out}-t{threads}")
+        )
+        runs.append(train(config, progress=False)[0])
+    for a, b in zip(*(jax.tree.leaves(r) for r in runs), strict=True):
+        np.testing.assert_array_equal(a, b)

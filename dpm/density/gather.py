@@ -33,7 +33,7 @@ GATHER = "gather"  # the stopwatch stage of tree building and queries
 
 def kd_tree(points: np.ndarray) -> cKDTree:
     """A cKDTree over points (N, 3) float64. scipy is imported here, on the first tree: at
-    start it cost every render a tenth of a second, and a scene without caustics none."""
+    start it cost every render about 70 ms, and a scene without caustics none."""
     from scipy.spatial import cKDTree
 
     return cKDTree(points)

@@ -184,8 +184,9 @@ class PhotonTable(NamedTuple):
 POSITION, DIRECTION, FLUX, NORMAL, FLUX_FEATURE = (slice(i, i + 3) for i in range(0, 15, 3))
 
 
-def photon_table(photons: PhotonMap) -> PhotonTable:
-    """The PhotonTable of a photon map (float32, scene units and W ÷ N)."""
+def photon_table(photons: PhotonMap, paths: float | None = None) -> PhotonTable:
+    """The PhotonTable of a photon map (float32, scene units and W ÷ N); `paths` is the map's
+    `feature_paths` where the caller has it already."""
     rows = np.zeros((len(photons.position) + 1, 16), np.float32)
     for columns, values in zip(
         (POSITION, DIRECTION, FLUX, NORMAL),
@@ -193,7 +194,8 @@ def photon_table(photons: PhotonMap) -> PhotonTable:
         strict=True,
     ):
         rows[:-1, columns] = values
-    power = photons.flux * np.float32(feature_paths(photons))
+    paths = feature_paths(photons) if paths is None else paths
+    power = photons.flux * np.float32(paths)
     rows[:-1, FLUX_FEATURE] = flux_map(jnp.asarray(power, jnp.float32))
     return PhotonTable(jnp.asarray(rows))
 
@@ -364,8 +366,8 @@ def predict_points(
     not taken from the machine's thread count, so the output does not depend on it."""
     index = photon_index(photons, watch)
     p = index.photons
-    table = photon_table(p)
     paths = feature_paths(p)
+    table = photon_table(p, paths)
     out = np.zeros((len(position), 3), np.float32)
     size = chunk_size(k)
 

@@ -12,13 +12,11 @@ from pathlib import Path
 
 import numpy as np
 
-from dpm.data.dataset import ShardCache, shard_sizes
+from dpm.data.dataset import MAX_CACHED_SHARDS, ShardCache, shard_sizes
 from dpm.density.gather import PhotonIndex
 from dpm.errors import InputError
 from dpm.nn.config import Config
 from dpm.nn.infer import Batch, neighbourhoods
-
-MAX_CACHED_SHARDS = 64  # bounded memory: beyond it, the oldest shard read is forgotten
 
 
 class Sampler:

@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.spatial import cKDTree
 
-from dpm.data.dataset import ShardCache, shard_sizes
+from dpm.data.dataset import MAX_CACHED_SHARDS, ShardCache, shard_sizes
 from dpm.density.base import in_plane, tangent_frame
 from dpm.density.gather import NORMAL_COS
 from dpm.density.shaped import (
@@ -41,7 +41,6 @@ from dpm.nn.shape_net import point_precisions
 
 HISTORY_K = (4, 256)  # history photons in the disc: log-uniform in this range
 MAX_CURRENT = 1024  # current photons kept per disc (a random subset, flux scaled, beyond)
-MAX_CACHED_SHARDS = 64
 
 
 class ShapeBatch(NamedTuple):

@@ -13,10 +13,13 @@ they lie.
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 import time
+from collections import deque
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import jax
@@ -38,6 +41,12 @@ from dpm.nn.sampler import Sampler
 from dpm.nn.shape_training import ShapeSampler, shape_estimates
 from dpm.nn.sharding import DataParallel
 from dpm.nn.weights import Weights, save_weights
+
+# Threads that draw training batches ahead of the steps, and how many batches they keep ready:
+# half the cores (the other half and the step's own threads compute), at most 8. On the
+# 16-core device a DPM-50 step waited on its batch (77 ms a step on an H100, as on 2 CPU cores).
+DRAW_THREADS = max(1, min(8, (os.cpu_count() or 2) // 2))
+DRAW_AHEAD = 2 * DRAW_THREADS
 
 
 def make_steps(
@@ -113,18 +122,23 @@ def train(config: Config, progress: bool = True) -> tuple[dict, list[dict]]:
     bar = tqdm(total=t.steps, initial=done, unit="step", desc="training", disable=not progress)
     start, last_save = time.perf_counter(), time.perf_counter()
     offset = float(rows[-1]["seconds"]) if rows else 0.0
+    pool = ThreadPoolExecutor(DRAW_THREADS, thread_name_prefix="draw")
     try:
 
         def draw(s: int) -> tuple:
             rng = np.random.default_rng((t.seed, s))
             return devices.split(sampler.draw(rng, t.batch, t.scenes_per_batch))
 
-        ahead = draw(done + 1) if done < t.steps else None
+        # Batches are drawn ahead on worker threads while the steps run (asynchronously, on
+        # the accelerator where there is one); each is a function of its step alone, so how
+        # many threads draw changes nothing but the speed.
+        ahead = deque(pool.submit(draw, s) for s in range(done + 1, t.steps + 1)[:DRAW_AHEAD])
         for s in range(done + 1, t.steps + 1):
-            new = step(params, opt_state, *ahead)  # runs asynchronously while the next batch
-            ahead = draw(s + 1) if s < t.steps else None  # is gathered; an interrupt in
-            params, opt_state, value = new  # between keeps step s - 1 as the last one done
-            done = s
+            batch = ahead.popleft().result()
+            if s + DRAW_AHEAD <= t.steps:
+                ahead.append(pool.submit(draw, s + DRAW_AHEAD))
+            params, opt_state, value = step(params, opt_state, *batch)  # an interrupt before
+            done = s  # this line keeps step s - 1 as the last one done
             row = {"step": s, "loss": f"{float(value):.6g}", "validation_loss": "",
                    "seconds": f"{offset + time.perf_counter() - start:.2f}"}  # fmt: skip
             if s % t.validate_every == 0 or s == t.steps:
@@ -140,6 +154,7 @@ def train(config: Config, progress: bool = True) -> tuple[dict, list[dict]]:
         run.save(done, params, opt_state, rows)
         raise
     finally:
+        pool.shutdown(wait=True, cancel_futures=True)
         bar.close()
         signal.signal(signal.SIGTERM, previous)
     run.save(done, params, opt_state, rows)
