@@ -4,9 +4,10 @@
                                          [--seeds 1 2] [--set unseen|examples]
 
 On each caustic scene of the unseen set (`benchmarks/scenes/make_unseen.py`, the controls
-left out), at the size of its caustic reference (`caustic_references.py`: SPPM at 2 × 512+
-passes; a uniformly scaled copy is scored against its scale-1 twin's, as
-`equal_time_unseen.py` does), the caustic component (`--component caustic`) is rendered:
+left out), at the size of its caustic reference (`caustic_references.py`: SPPM at 2 × 512
+to 2 × 6400 passes, 4 times the longest render's; a uniformly scaled copy is scored against
+its scale-1 twin's, as `equal_time_unseen.py` does), the caustic component
+(`--component caustic`) is rendered:
 
 - at equal passes (`--passes`): in this process, the same seed with and without the network
   (the same samples: the ratio is the filter's effect alone);
@@ -71,7 +72,7 @@ def scene_size(name: str) -> tuple[Path, int, int]:
 def equal_passes(name: str, passes: list[int], seeds: list[int]) -> list[dict]:
     """Rows of RMSE with and without the network at each pass count."""
     path, w, h = scene_size(name)
-    ref, noise, _ = load_reference(unit_scale(name), w, h)
+    ref, noise, ref_passes = load_reference(unit_scale(name), w, h)
     scene = load_scene(path)
     rows = []
     for p in passes:
@@ -83,7 +84,8 @@ def equal_passes(name: str, passes: list[int], seeds: list[int]) -> list[dict]:
                                         progress=False)  # fmt: skip
                 errors[network].append(rmse(render(scene, options).image, ref))
         row = {"scene": name, "passes": p, "network": float(np.mean(errors[True])),
-               "plain": float(np.mean(errors[False])), "reference_noise": noise}  # fmt: skip
+               "plain": float(np.mean(errors[False])), "reference_noise": noise,
+               "reference_passes": ref_passes}  # fmt: skip
         rows.append(row)
         print(f"{name} {p} passes: network {row['network']:.5f} plain {row['plain']:.5f} "
               f"ratio {row['network'] / row['plain']:.3f}", flush=True)  # fmt: skip
@@ -98,7 +100,7 @@ def network_seconds(stats: dict) -> float:
 def equal_time(name: str, times: list[float], seeds: list[int]) -> list[dict]:
     """Rows of whole-process RMSE, seconds, passes and the network's share at each budget."""
     path, w, h = scene_size(name)
-    ref, noise, _ = load_reference(unit_scale(name), w, h)
+    ref, noise, ref_passes = load_reference(unit_scale(name), w, h)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
@@ -113,7 +115,12 @@ def equal_time(name: str, times: list[float], seeds: list[int]) -> list[dict]:
                     extra = caustic + (() if network else ("--no-network",))
                     image, seconds, stats = dpm_run(path, w, h, budget, seed, folder, extra)
                     got[network].append((rmse(image, ref), seconds, stats))
-            row = {"scene": name, "budget": budget, "reference_noise": noise}
+            row = {
+                "scene": name,
+                "budget": budget,
+                "reference_noise": noise,
+                "reference_passes": ref_passes,
+            }
             for network, key in ((True, "network"), (False, "plain")):
                 row[key] = float(np.mean([e for e, _, _ in got[network]]))
                 row[f"{key}_s"] = float(np.mean([s for _, s, _ in got[network]]))
@@ -134,7 +141,7 @@ def ladder(
 ) -> list[dict]:
     """Rows of whole-process seconds and RMSE of each of `methods` at each photon count."""
     path, w, h = scene_size(name)
-    ref, noise, _ = load_reference(unit_scale(name), w, h)
+    ref, noise, ref_passes = load_reference(unit_scale(name), w, h)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "out.exr"
@@ -151,7 +158,7 @@ def ladder(
                 seconds = wall(command(method, n, seed))
                 row = {"scene": name, "method": method, "photons": n, "seed": seed,
                        "seconds": seconds, "rmse": rmse(read_exr(out), ref),
-                       "reference_noise": noise}  # fmt: skip
+                       "reference_noise": noise, "reference_passes": ref_passes}  # fmt: skip
                 rows.append(row)
                 print(f"{name} {method} {n:,} photon paths: {row['rmse']:.5f} in "
                       f"{seconds:.2f} s", flush=True)  # fmt: skip
@@ -237,13 +244,23 @@ def ladder_report(record: dict) -> list[str]:
     """The ladder's table: per scene and photon count, each method's RMSE and seconds; then
     auto at each budget against the scene's best classic method, DPM and nppm, each at the
     least RMSE of its runs that took no more time than auto."""
-    rows, times = record["ladder"], record["times"]
+    rows, times = record["ladder"], ladder_times(record)
     seeds = sorted({x.get("seed", record.get("ladder_seed")) for x in rows}, key=str)
     lines = [f"## The other caustic methods at their defaults (seed {', '.join(map(str, seeds))})",
              "", "Whole-process seconds and RMSE at each method's defaults (16 camera samples "
              "per pixel); `best` is the classic", "method (ppm, appm, cppm, sppm) with the least "
              "RMSE over the scene's ladder, chosen against the reference (no user can).",
              ""]  # fmt: skip
+    if times is not record["times"]:
+        lines += [
+            "These rows, and the `auto` rows they are compared with below and in the "
+            "chart, were scored",
+            "against the references of their own run (2 × 512 "
+            "passes, before the longer ones of the tables above):",
+            "a ladder is compared only with `auto` rows scored against the same references.",
+            "",
+        ]
+        # fmt: skip
     head = ["scene", "photon paths", *LADDER_METHODS, "best"]
     table = []
     for name in dict.fromkeys(x["scene"] for x in rows):
@@ -280,6 +297,20 @@ def ladder_report(record: dict) -> list[str]:
     return lines
 
 
+def reference_passes(row: dict) -> int:
+    """The passes of the reference a row was scored against (rows from before the field: 512)."""
+    return int(row.get("reference_passes", 512))
+
+
+def ladder_times(record: dict) -> list[dict]:
+    """The `auto` rows of the equal-time comparison scored against the same references as the
+    ladder's rows: the current ones, or those kept from the ladder's own run."""
+    same = {(x["scene"], reference_passes(x)) for x in record["ladder"]}
+    if all((x["scene"], reference_passes(x)) in same for x in record["times"]):
+        return record["times"]
+    return record.get("ladder_times") or []
+
+
 def chart(record: dict, path: Path) -> None:
     """Per scene, caustic RMSE against whole-process seconds, with and without the network."""
     import matplotlib
@@ -287,12 +318,13 @@ def chart(record: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    names = list(dict.fromkeys(x["scene"] for x in record["times"]))
+    times = ladder_times(record) if record.get("ladder") else record["times"]
+    names = list(dict.fromkeys(x["scene"] for x in times))
     cols = 4
     rows = -(-len(names) // cols)
     fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.6 * rows), squeeze=False)
     for ax, name in zip(axes.flat, names, strict=False):
-        xs = [x for x in record["times"] if x["scene"] == name]
+        xs = [x for x in times if x["scene"] == name]
         for key, label in (("network", "auto"), ("plain", "auto --no-network")):
             ax.loglog([x[f"{key}_s"] for x in xs], [x[key] for x in xs], "o-", label=label)
         ladder_rows = record.get("ladder", [])
@@ -365,6 +397,8 @@ def main() -> None:
             record["ladder"] += ladder(name, a.ladder, a.seeds[0], tuple(a.ladder_methods))
     else:
         record["ladder"], record["ladder_seed"] = old.get("ladder", []), old.get("ladder_seed")
+        # the auto rows the kept ladder was compared with (its references), kept with it
+        record["ladder_times"] = old.get("ladder_times") or old.get("times", [])
     for part, run in (("passes", equal_passes), ("times", equal_time)):
         values = getattr(a, part)
         if not values:  # not rerun: the saved rows stay

@@ -1,15 +1,21 @@
 """Per-pixel caustic references of the unseen scenes, for `auto`'s caustic component.
 
-    python benchmarks/caustic_references.py [--passes 512] [--scenes NAME ...] [--set examples]
+    python benchmarks/caustic_references.py [--passes N] [--scenes NAME ...] [--set examples]
 
 `auto --component caustic` averages, per pixel, SPPM's estimates at one jittered visible
 point per pass, so its limit is the caustic radiance the camera sees averaged over the
 pixel. The reference is the same estimator run long: `auto --component caustic
 --no-network` at `--passes` passes of 4 photon paths per pixel, twice with independent
 seeds (the halves, so its noise is known: the RMSE between them over 2 is the mean's). It is
-consistent and shares no sample with any render it scores. Its remaining bias (SPPM's after
-that many passes, radii shrunk to about a third of their start) is the renders' own at
-long budgets, which favours the estimate without the network, never the network's.
+consistent and shares no sample with any render it scores. Its remaining bias is SPPM's
+after that many passes, and both halves share it, so the noise estimate does not show it:
+at closeup_caustic's focus the halves of 512 passes agreed on 23.6 where renders of 1024
+passes gave 27.5 (the radius shrinks as passes^-1/6, the blur as passes^-1/3), and a render
+longer than its reference was scored against the reference's blur (16-s renders there ran
+1121 passes). So each unseen scene gets PASSES[name]: at least 4 times the passes of the
+longest 16-s render of `caustic_network.py` (its equal-time table of 2026-11-26), 512 where
+that is more; `--passes` overrides it. What bias is left favours the estimate whose blur
+is nearer the reference's, the render without the network more often than not.
 
 Each scene is rendered at W = min(camera width, MAX_WIDTH), as its Mitsuba reference
 (`equal_time_unseen.py`); a uniformly scaled copy gets none (it is scored against its scale-1
@@ -43,6 +49,12 @@ CONTROLS = ("control_room", "control_huge")  # no mirror or glass: no caustics
 SCALED = ("spheres_s0p01", "spheres_s100")  # copies of spheres_s1, scored against its reference
 MAX_WIDTH = 256
 SEEDS = (1001, 1002)
+DEFAULT_PASSES = 512
+PASSES = {  # 4x the passes of the longest 16-s render (caustic_network.md, 2026-11-26)
+    "closeup_caustic": 4500, "far_camera": 6400, "tinted_glass": 3400, "prism_slab": 3200,
+    "concave_mirror": 2100, "tall_vase": 2300, "spheres_s1": 2048, "cardioid_cup": 1200,
+    "lens_wall": 1200, "far_wall": 800, "huge_floor": 700,
+}  # fmt: skip
 
 
 def reference_file(name: str, width: int, height: int, which: str = "unseen") -> Path:
@@ -91,7 +103,7 @@ def make(name: str, passes: int, which: str = "unseen") -> None:
 def main() -> None:
     """Make the missing references."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--passes", type=int, default=512)
+    p.add_argument("--passes", type=int, default=None, help="passes per half (default: PASSES)")
     p.add_argument("--scenes", nargs="*")
     p.add_argument("--set", choices=sorted(SETS), default="unseen")
     a = p.parse_args()
@@ -105,7 +117,8 @@ def main() -> None:
     if not names:
         sys.exit(f"no scenes in {folder}: run benchmarks/scenes/make_unseen.py first")
     for name in names:
-        make(name, a.passes, a.set)
+        passes = a.passes or (PASSES.get(name, DEFAULT_PASSES) if a.set == "unseen" else 512)
+        make(name, passes, a.set)
 
 
 if __name__ == "__main__":
