@@ -196,6 +196,11 @@ def report(record: dict) -> str:
         "on them.",
         "",
     ]
+    passes = {x["scene"]: reference_passes(x) for x in record["passes"] + record["times"]}
+    if passes:
+        lines += ["Passes per half of each scene's reference (4 times the longest render's, "
+                  "at least 512): " + ", ".join(f"{n} {p}" for n, p in passes.items()) + ".",
+                  ""]  # fmt: skip
     if record["passes"]:
         lines += [f"## Equal passes (same samples; seeds {record.get('passes_seeds')})", ""]
         head = ["scene", "passes", "network", "no network", "ratio", "reference noise"]
@@ -405,9 +410,13 @@ def main() -> None:
             record[part] = old[part]
             record[f"{part}_seeds"] = old.get(f"{part}_seeds", old.get("seeds"))
             continue
+        if old.get(f"{part}_seeds", old.get("seeds")) == a.seeds:  # other scenes' rows stay
+            record[part] = [x for x in old[part] if x["scene"] not in names]
         record[f"{part}_seeds"] = a.seeds
         for name in names:
             record[part] += run(name, values, a.seeds)
+        order = {n: i for i, n in enumerate(UNSEEN)}
+        record[part].sort(key=lambda x: order.get(x["scene"], len(order)))
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "unseen.json").write_text(json.dumps(record, indent=1))
     TABLE.write_text(report(record))

@@ -8,7 +8,7 @@ network's starting point); a (scene, budget) whose map holds fewer than K photon
 out, as in training.
 
     python benchmarks/dpm_heldout.py --config configs/dpm-50.toml \
-        --weights OLD.msgpack NEW.msgpack [--out FILE.md]
+        --weights OLD.msgpack NEW.msgpack [--out TABLE]
 
 Needs the config's training set (`dpm-train --config ...` makes it).
 """
