@@ -198,9 +198,8 @@ def report(record: dict) -> str:
     ]
     passes = {x["scene"]: reference_passes(x) for x in record["passes"] + record["times"]}
     if passes:
-        lines += ["Passes per half of each scene's reference (4 times the longest render's, "
-                  "at least 512): " + ", ".join(f"{n} {p}" for n, p in passes.items()) + ".",
-                  ""]  # fmt: skip
+        lines += ["Passes per half of each scene's reference (of its equal-time rows): "
+                  + ", ".join(f"{n} {p}" for n, p in passes.items()) + ".", ""]  # fmt: skip
     if record["passes"]:
         lines += [f"## Equal passes (same samples; seeds {record.get('passes_seeds')})", ""]
         head = ["scene", "passes", "network", "no network", "ratio", "reference noise"]
@@ -256,15 +255,21 @@ def ladder_report(record: dict) -> list[str]:
              "per pixel); `best` is the classic", "method (ppm, appm, cppm, sppm) with the least "
              "RMSE over the scene's ladder, chosen against the reference (no user can).",
              ""]  # fmt: skip
-    if times is not record["times"]:
+    refs = ladder_references(rows)
+    older = sorted({n for n, p in refs.items() if x_passes(record, n) not in (None, p)})
+    if older:
         lines += [
-            "These rows, and the `auto` rows they are compared with below and in the "
-            "chart, were scored",
-            "against the references of their own run (2 × 512 "
-            "passes, before the longer ones of the tables above):",
-            "a ladder is compared only with `auto` rows scored against the same references.",
+            "Scored against older references than the tables above (passes per half: "
+            + ", ".join(f"{n} {refs[n]}" for n in older)
+            + "); each scene's ladder is compared",
+            "below and in the chart only with `auto` rows scored against its own references "
+            "(from the ladder's run where the tables' are newer).",
             "",
         ]
+    mixed = sorted({x["scene"] for x in rows} - set(refs))
+    if mixed:
+        lines += [f"Left out of the comparisons (rows scored against two references): "
+                  f"{', '.join(mixed)}.", ""]  # fmt: skip
         # fmt: skip
     head = ["scene", "photon paths", *LADDER_METHODS, "best"]
     table = []
@@ -307,13 +312,39 @@ def reference_passes(row: dict) -> int:
     return int(row.get("reference_passes", 512))
 
 
+def x_passes(record: dict, name: str) -> int | None:
+    """The reference passes of scene `name`'s current equal-time rows (None: it has none)."""
+    got = [reference_passes(x) for x in record["times"] if x["scene"] == name]
+    return got[0] if got else None
+
+
+def ladder_references(rows: list[dict]) -> dict[str, int]:
+    """Each scene's reference passes in the ladder's rows; a scene whose rows were scored
+    against more than one reference is left out (its methods cannot be compared)."""
+    seen: dict[str, set[int]] = {}
+    for x in rows:
+        seen.setdefault(x["scene"], set()).add(reference_passes(x))
+    return {name: next(iter(p)) for name, p in seen.items() if len(p) == 1}
+
+
+def matching_times(ladder: list[dict], *sources: list[dict]) -> list[dict]:
+    """Per scene of the ladder, the `auto` rows scored against that scene's ladder reference:
+    from the first source that has them (no scene's rows from two sources)."""
+    refs = ladder_references(ladder)
+    out = []
+    for name, passes in refs.items():
+        for rows in sources:
+            got = [x for x in rows if x["scene"] == name and reference_passes(x) == passes]
+            if got:
+                out += got
+                break
+    return out
+
+
 def ladder_times(record: dict) -> list[dict]:
-    """The `auto` rows of the equal-time comparison scored against the same references as the
-    ladder's rows: the current ones, or those kept from the ladder's own run."""
-    same = {(x["scene"], reference_passes(x)) for x in record["ladder"]}
-    if all((x["scene"], reference_passes(x)) in same for x in record["times"]):
-        return record["times"]
-    return record.get("ladder_times") or []
+    """The `auto` rows the ladder is compared with: the current equal-time rows where they
+    were scored against the ladder's references, else those kept from the ladder's own run."""
+    return matching_times(record["ladder"], record["times"], record.get("ladder_times", []))
 
 
 def chart(record: dict, path: Path) -> None:
@@ -325,6 +356,8 @@ def chart(record: dict, path: Path) -> None:
 
     times = ladder_times(record) if record.get("ladder") else record["times"]
     names = list(dict.fromkeys(x["scene"] for x in times))
+    if not names:
+        return
     cols = 4
     rows = -(-len(names) // cols)
     fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.6 * rows), squeeze=False)
@@ -402,8 +435,6 @@ def main() -> None:
             record["ladder"] += ladder(name, a.ladder, a.seeds[0], tuple(a.ladder_methods))
     else:
         record["ladder"], record["ladder_seed"] = old.get("ladder", []), old.get("ladder_seed")
-        # the auto rows the kept ladder was compared with (its references), kept with it
-        record["ladder_times"] = old.get("ladder_times") or old.get("times", [])
     for part, run in (("passes", equal_passes), ("times", equal_time)):
         values = getattr(a, part)
         if not values:  # not rerun: the saved rows stay
@@ -417,6 +448,10 @@ def main() -> None:
             record[part] += run(name, values, a.seeds)
         order = {n: i for i, n in enumerate(UNSEEN)}
         record[part].sort(key=lambda x: order.get(x["scene"], len(order)))
+    # the auto rows of earlier runs scored against the (kept) ladder's references, kept with it
+    record["ladder_times"] = matching_times(
+        record["ladder"], old.get("ladder_times", []), old.get("times", [])
+    )
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "unseen.json").write_text(json.dumps(record, indent=1))
     TABLE.write_text(report(record))

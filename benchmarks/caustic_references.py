@@ -117,7 +117,8 @@ def main() -> None:
     if not names:
         sys.exit(f"no scenes in {folder}: run benchmarks/scenes/make_unseen.py first")
     for name in names:
-        passes = a.passes or (PASSES.get(name, DEFAULT_PASSES) if a.set == "unseen" else 512)
+        default = PASSES.get(name, DEFAULT_PASSES) if a.set == "unseen" else DEFAULT_PASSES
+        passes = a.passes or default
         make(name, passes, a.set)
 
 

@@ -42,7 +42,12 @@ def heldout_batches(config_path: Path, k: int) -> dict[int, list[tuple[Batch, np
     manifest = read_manifest(out)
     if manifest is None:
         raise SystemExit(f"{out}: no training set; run dpm-train --config {config_path} first")
-    entries = manifest["shards"][config.data.scenes - config.train.validation_scenes :]
+    if manifest["config"] != config.data.identity():
+        raise SystemExit(f"{out}: made with other [data] settings than {config_path}'s")
+    held_out = range(config.data.scenes - config.train.validation_scenes, config.data.scenes)
+    entries = [e for e in manifest["shards"] if e["index"] in held_out]
+    if len(entries) != len(held_out):
+        raise SystemExit(f"{out}: held-out scenes missing; run dpm-train --config {config_path}")
     cache = ShardCache(out, entries, config.data.budgets, len(entries))
     rng = np.random.default_rng(2026)
     batches: dict[int, list] = {b: [] for b in config.data.budgets}

@@ -364,8 +364,13 @@ def test_kill_and_resume_gives_the_same_parameters(tiny: Config, monkeypatch) ->
     whole = replace(tiny, train=replace(tiny.train, steps=steps, out=tiny.train.out + "-whole"))
     cut = replace(whole, train=replace(whole.train, out=tiny.train.out + "-cut"))
     params, rows = train(whole, progress=False)
-    # Ctrl-C in the 7th draw (validation, then steps 1 … 6), on a drawing thread: the loop
-    # meets it when it needs step 6's batch, so step 5 is the last done and saved
+    # Ctrl-C in the 7th draw (validation, then steps 1 … 6), on the one drawing thread (with
+    # more, the 7th call could be another step's): the loop meets it when it needs step 6's
+    # batch, so step 5 is the last done and saved
+    import dpm.nn.train as training
+
+    monkeypatch.setattr(training, "DRAW_THREADS", 1)
+    monkeypatch.setattr(training, "DRAW_AHEAD", 2)
     draw, calls = Sampler.draw, []
 
     def interrupted(self, *args):
