@@ -40,7 +40,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from caustic_references import load_reference
+from caustic_references import DEFAULT_PASSES, load_reference
 from equal_time import dpm_run, wall
 
 sys.path.insert(0, str(Path(__file__).parent / "scenes"))
@@ -256,7 +256,9 @@ def ladder_report(record: dict) -> list[str]:
              "RMSE over the scene's ladder, chosen against the reference (no user can).",
              ""]  # fmt: skip
     refs = ladder_references(rows)
-    older = sorted({n for n, p in refs.items() if x_passes(record, n) not in (None, p)})
+    older = sorted(
+        {n for n, p in refs.items() if times_reference_passes(record, n) not in (None, p)}
+    )
     if older:
         lines += [
             "Scored against older references than the tables above (passes per half: "
@@ -308,11 +310,12 @@ def ladder_report(record: dict) -> list[str]:
 
 
 def reference_passes(row: dict) -> int:
-    """The passes of the reference a row was scored against (rows from before the field: 512)."""
-    return int(row.get("reference_passes", 512))
+    """The passes of the reference a row was scored against (rows from before the field: the
+    references' first length, DEFAULT_PASSES)."""
+    return int(row.get("reference_passes", DEFAULT_PASSES))
 
 
-def x_passes(record: dict, name: str) -> int | None:
+def times_reference_passes(record: dict, name: str) -> int | None:
     """The reference passes of scene `name`'s current equal-time rows (None: it has none)."""
     got = [reference_passes(x) for x in record["times"] if x["scene"] == name]
     return got[0] if got else None

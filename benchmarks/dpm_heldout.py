@@ -19,15 +19,13 @@ import argparse
 import datetime
 from pathlib import Path
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
 from common import cpu, markdown_table
 from dpm.data.dataset import ShardCache, read_manifest, shard_sizes
 from dpm.density.gather import PhotonIndex
 from dpm.nn.config import load_config
-from dpm.nn.features import kernel_estimate
+from dpm.nn.features import uniform_radiance
 from dpm.nn.infer import Batch, make_predict, neighbourhoods
 from dpm.nn.model import make_model
 from dpm.nn.weights import load_weights
@@ -67,14 +65,6 @@ def heldout_batches(config_path: Path, k: int) -> dict[int, list[tuple[Batch, np
     return batches
 
 
-def uniform_kernel(b: Batch) -> np.ndarray:
-    """(n, 3) PM-K radiance of a Batch: Eq. 2 with every weight 1."""
-    flat = jax.vmap(
-        lambda b: kernel_estimate(jnp.ones(b.valid.shape), b.flux, b.valid, b.albedo, b.radius)
-    )
-    return np.asarray(flat(b))
-
-
 def rmse_of(parts: list[tuple[np.ndarray, np.ndarray]]) -> float:
     """RMSE over every (estimate, reference) pair's RGB values."""
     err = np.concatenate([(e - r).ravel() for e, r in parts])
@@ -94,8 +84,9 @@ def main() -> None:
         raise SystemExit("the weight files must share one K")
     batches = heldout_batches(args.config, k)
     budgets = [b for b in batches if batches[b]]
-    rows = [[f"PM-{k}"] + [f"{rmse_of([(uniform_kernel(b), r) for b, r in batches[n]]):.4f}"
-                           for n in budgets]]  # fmt: skip
+    uniform = [rmse_of([(np.asarray(uniform_radiance(b)), r) for b, r in batches[n]])
+               for n in budgets]  # fmt: skip
+    rows = [[f"PM-{k}"] + [f"{s:.4f}" for s in uniform]]
     for path, w in zip(args.weights, weights, strict=True):
         predict = make_predict(make_model(w.architecture, w.width))
         scores = [rmse_of([(np.asarray(predict(w.params, b)), r) for b, r in batches[n]])

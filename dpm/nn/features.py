@@ -17,6 +17,7 @@ at random about the normal in training and towards the neighbours' mean offset a
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
 FLUX_A = 0.01  # a of t_a (Eq. 3)
@@ -95,3 +96,11 @@ def kernel_estimate(
     (K, 3), valid (K,) bool, albedo (3,) and bandwidth r (scene units)."""
     total = jnp.sum(jnp.where(valid[:, None], weight[:, None] * flux, 0.0), axis=0)
     return albedo / jnp.pi * total / (jnp.pi * jnp.maximum(radius, MIN_RADIUS) ** 2)
+
+
+def uniform_radiance(batch) -> jnp.ndarray:
+    """(B, 3) PM-K radiance of a Batch of B points (`dpm.nn.infer.Batch`): Eq. 2 with every
+    weight 1, the network's starting point."""
+    return jax.vmap(
+        lambda b: kernel_estimate(jnp.ones(b.valid.shape), b.flux, b.valid, b.albedo, b.radius)
+    )(batch)

@@ -23,7 +23,6 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 import optax
 from tqdm import tqdm
@@ -32,7 +31,7 @@ from dpm.data.caustic_set import make_caustic_shard
 from dpm.data.dataset import build
 from dpm.nn.caustic_training import CausticSampler, caustic_estimates
 from dpm.nn.config import Config
-from dpm.nn.features import kernel_estimate
+from dpm.nn.features import uniform_radiance
 from dpm.nn.infer import point_radiance
 from dpm.nn.losses import training_loss
 from dpm.nn.model import example_input, make_model
@@ -60,12 +59,9 @@ def make_steps(
     optimiser = optax.adam(learning_rate)
     if estimates is None:
         predict = jax.vmap(lambda params, b: point_radiance(model, params, b), (None, 0))
-        flat = jax.vmap(
-            lambda b: kernel_estimate(jnp.ones(b.valid.shape), b.flux, b.valid, b.albedo, b.radius)
-        )
 
         def estimates(params, batch):
-            return predict(params, batch), flat(batch)
+            return predict(params, batch), uniform_radiance(batch)
 
     def loss(params, batch, target, part=None):
         estimate, uniform = estimates(params, batch)
