@@ -72,7 +72,7 @@ def run_scene(name: str, set_: str, budgets: tuple[int, ...], defaults_only: boo
     scene = load_scene(obj)
     bvh = build_bvh(scene)
     camera = scene.camera.with_resolution(width, height)
-    reference, noise, _ = load_reference(twin, width, height, set_)
+    reference, noise, reference_passes = load_reference(twin, width, height, set_)
     points = trace_visible_points(scene, bvh, camera, 1, 0, (0, height))
     pixel = float(np.median(points.footprint[points.hit]))
     path = OUT / set_ / f"{name}.json"
@@ -89,6 +89,7 @@ def run_scene(name: str, set_: str, budgets: tuple[int, ...], defaults_only: boo
             "default_per_pass": per_pass,
             "default_machine": cpu(),
             "default_date": datetime.date.today().isoformat(),
+            "reference_passes": reference_passes,  # per half; a row is scored against these
         }
         if defaults_only:
             done[n].update(default)
@@ -176,14 +177,14 @@ def markdown() -> str:
                 best = row["best"]
                 rows.append([
                     r["scene"], f"{row['paths']:,}", f"{row['caustic_photons']:,}",
-                    f"{r['noise']:.4f}",
+                    f"{r['noise']:.4f}", f"{row.get('reference_passes', 512)}",
                     f"{-(-row['paths'] // row['default_per_pass'])}",
                     f"{row['default']:.4f}", f"{best['rmse']:.4f}",
                     f"{best['radius'] / r['pixel_width']:.2f} px, {best['passes']} passes",
                     f"{ratio:.2f}",
                 ])  # fmt: skip
-        head = ["scene", "paths", "caustic photons", "ref. noise", "default passes", "default",
-                "best", "best setting", "default / best"]  # fmt: skip
+        head = ["scene", "paths", "caustic photons", "ref. noise", "ref. passes",
+                "default passes", "default", "best", "best setting", "default / best"]  # fmt: skip
         machines = "; ".join(sorted({r["machine"] for r in records}))  # RMSE: any will do
         geo = geomean(ratios)
         lines += ["", f"## {set_} ({machines})", "", *markdown_table(head, rows), "",
