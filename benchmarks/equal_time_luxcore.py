@@ -19,8 +19,8 @@ The second peer of `equal_time_unseen.py` (same scenes, resolutions, references 
 - Per budget dpm runs first, then LuxCore (the machine's load falls on both in turn). Both
   run once untimed per scene first (dpm at the largest budget for Numba's cache; LuxCore one
   short run, for the reserve).
-- Scored by RMSE against the scene's Mitsuba 3 reference (2 x 4096 spp); LuxCore's score is
-  the better of plain and OIDN; ratio = dpm / LuxCore's best.
+- Scored by RMSE against the scene's Mitsuba 3 reference (2 x 16384 spp; the controls
+  2 x 4096); LuxCore's score is the better of plain and OIDN; ratio = dpm / LuxCore's best.
 
 Writes results/equal_time_luxcore/NAME.json per scene and results/equal_time_luxcore.md.
 """
@@ -167,8 +167,9 @@ def report(records: list[dict]) -> str:
         "wall time from launch to exit, dpm warm; LuxCore time-boxed to dpm's measured wall",
         "time but never stopped before one sample per pixel (the caustic cache's first build",
         "cannot be cut short: rows marked late took more than 10 % longer than dpm); RMSE",
-        "against the scene's Mitsuba 3 reference (2 x 4096 spp); LuxCore's score is the better",
-        "of its plain film and its OIDN image (albedo and normal guides).",
+        "against the scene's Mitsuba 3 reference (2 x 16384 spp; the controls 2 x 4096);",
+        "LuxCore's score is the better of its plain film and its OIDN image (albedo and normal",
+        "guides).",
         f"Machine: {'; '.join(machines)}; {', '.join(renderers)}; {', '.join(dates)}.",
         "",
         "## Scenes with caustics",
