@@ -22,6 +22,10 @@ import numpy as np
 N_BINS = 32  # SAH bins per axis; with 16, paths in the pools' wavy water took 5–9 % longer
 MAX_LEAF = 4  # a node with more triangles is always split; a leaf is one 4-lane test
 TRAVERSAL_COST = 2.0  # SAH cost of one binary node relative to one triangle test
+# Triangles per unit of a leaf's SAH cost. 1 (each costs one) beat Embree's model for its
+# 4-triangle leaves (one unit per block of 4, as a leaf here is one 4-lane test): those made
+# fewer, fuller leaves that traced slower (benchmarks/results/bvh_sah.md).
+LEAF_COST_LANES = 1
 WIDTH = 8  # children per node
 REFS = 6 * WIDTH  # first column of the child references (after six planes of WIDTH floats)
 RECORD = 8 * WIDTH  # 4-byte columns per node record (two of padding per child)
@@ -61,7 +65,10 @@ def _half_area(lo0, lo1, lo2, hi0, hi1, hi2):
 
 
 @nb.njit(cache=True)
-def _build(tri_lo, tri_hi, centroid, n_bins, max_leaf, traversal_cost):
+def _build(tri_lo, tri_hi, centroid, n_bins, max_leaf, traversal_cost, lanes):
+    """Binary SAH build over triangle boxes (T, 3) and centroids (T, 3): a leaf costs one unit
+    per block of `lanes` triangles. Returns depth-first nodes (boxes, child, count), the
+    triangle order and the depth."""
     n_tri = tri_lo.shape[0]
     order = np.arange(n_tri).astype(np.int32)
     max_nodes = 2 * n_tri
@@ -150,12 +157,14 @@ def _build(tri_lo, tri_hi, centroid, n_bins, max_leaf, traversal_cost):
                 if lc == 0 or right_count[b] == 0:
                     continue
                 left_area = _half_area(llo[0], llo[1], llo[2], lhi[0], lhi[1], lhi[2])
-                cost = traversal_cost + (lc * left_area + right_count[b] * right_area[b]) / max(
+                blocks_l = (lc + lanes - 1) // lanes
+                blocks_r = (right_count[b] + lanes - 1) // lanes
+                cost = traversal_cost + (blocks_l * left_area + blocks_r * right_area[b]) / max(
                     parent_area, 1e-300
                 )
                 if cost < best_cost:
                     best_cost, best_axis, best_split = cost, a, b
-        if n <= max_leaf and (best_axis < 0 or best_cost >= n):
+        if n <= max_leaf and (best_axis < 0 or best_cost >= (n + lanes - 1) // lanes):
             child[node], count[node] = start, n
             continue
         if best_axis >= 0:
@@ -269,6 +278,7 @@ def build_bvh_from_triangles(triangles: np.ndarray) -> BVH:
         N_BINS,
         MAX_LEAF,
         TRAVERSAL_COST,
+        LEAF_COST_LANES,
     )
     records, levels = _collapse(bounds, child, count)
     nodes = _aligned(records.shape, np.int32)

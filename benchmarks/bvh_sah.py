@@ -1,0 +1,130 @@
+"""The BVH build's SAH constants against alternatives: 1-thread closest-hit rays/s and pt samples/s.
+
+    python benchmarks/bvh_sah.py [SCENE ...]
+
+Per example scene (default: all, the cornell box included), builds the BVH with the shipped
+SAH constants (`bvh.TRAVERSAL_COST`, leaves costed per triangle) and with the VARIANTS below,
+checks that every build returns the same closest hits, then times them in turn, round after
+round on one Numba thread (medians of ROUNDS): 200,000 incoherent rays (`test_bvh`'s), the
+camera's 384² primary rays, and `pt` at 96² × 16 samples per pixel. A variant's speed is the
+shipped build's seconds over its own (above 1: faster). Leaves "costed per block of 4" follow
+Embree's model for its 4-triangle leaves: a leaf of up to 4 triangles is one SIMD test, as it
+is here (`traverse.LEAF_LANES`), so it costs one unit whatever its count. Chosen on the
+examples only; writes benchmarks/results/bvh_sah.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import time
+from collections.abc import Callable
+
+import numba
+import numpy as np
+from test_bvh import EXAMPLES, PATHS, camera_rays, incoherent_rays, load_triangles
+
+from common import RESULTS, cpu, geomean, markdown_table
+from dpm import load_scene
+from dpm.tracer import BVH, intersect, trace_pixels
+from dpm.tracer import bvh as B
+
+SHIPPED = (B.TRAVERSAL_COST, 1)
+VARIANTS = [SHIPPED, (1.0, 1), (3.0, 1), (2.0, 4), (1.0, 4), (0.5, 4)]  # (cost, lanes)
+ROUNDS = 5
+TABLE = RESULTS / "bvh_sah.md"
+
+
+def build(tri: np.ndarray, cost: float, lanes: int) -> tuple[BVH, int, int]:
+    """A BVH over triangles (T, 3, 3) with SAH traversal cost `cost` and leaves costed per
+    block of `lanes` triangles, its interior node count and its leaf count."""
+    tri = np.ascontiguousarray(tri, np.float32).reshape(-1, 3, 3)
+    t64 = tri.astype(np.float64)
+    bounds, child, count, order, _ = B._build(
+        t64.min(1), t64.max(1), t64.mean(1), B.N_BINS, B.MAX_LEAF, cost, lanes
+    )
+    records, levels = B._collapse(bounds, child, count)
+    nodes = B._aligned(records.shape, np.int32)
+    nodes[:] = records
+    verts = np.ascontiguousarray(tri[order].reshape(-1, 9))
+    planes = B._aligned((9, len(verts) + B.MAX_LEAF), np.float32)
+    planes[:, : len(verts)] = verts.T
+    planes[:, len(verts) :] = 0.0
+    arrays = B.BVHArrays(nodes.view(np.float32), nodes, verts, order, planes)
+    refs = records[:, B.REFS : B.REFS + B.WIDTH]
+    return B.BVH(arrays, int(levels)), len(records), int(((refs < 0) & (refs != B.EMPTY)).sum())
+
+
+def leaf_cost(variant: tuple[float, int]) -> str:
+    """How a variant costs a leaf: per triangle or per block of lanes."""
+    return "triangle" if variant[1] == 1 else f"block of {variant[1]}"
+
+
+def seconds(fn: Callable[[], object]) -> float:
+    """Wall seconds of one call of fn."""
+    start = time.perf_counter()
+    fn()
+    return time.perf_counter() - start
+
+
+def scene_rows(name: str) -> list[list[str]]:
+    """One table row per variant on scene `name` (the shipped build first)."""
+    tri = load_triangles(name)
+    scene = load_scene(PATHS[name])
+    camera = scene.camera.with_resolution(96, 96)
+    rays = {"incoherent": incoherent_rays(tri, 200_000), "camera": camera_rays(name, tri, 384)}
+    built = {v: build(tri, *v) for v in VARIANTS}
+    reference = intersect(built[SHIPPED][0], *rays["incoherent"])
+    for bvh, _, _ in built.values():  # every build finds the same hits (and compiles first)
+        t, hit = intersect(bvh, *rays["incoherent"])  # at ties, which triangle may differ
+        assert np.array_equal(t, reference[0]) and np.array_equal(hit < 0, reference[1] < 0)
+        trace_pixels(scene, bvh, camera, 1, 0, (0, 2))
+    runs = {v: {"incoherent": [], "camera": [], "pt": []} for v in VARIANTS}
+    for r in range(ROUNDS):
+        for v in VARIANTS if r % 2 == 0 else VARIANTS[::-1]:
+            bvh = built[v][0]
+            for kind, (o, d) in rays.items():
+                runs[v][kind].append(seconds(lambda: intersect(bvh, o, d)))  # noqa: B023
+            runs[v]["pt"].append(seconds(lambda: trace_pixels(scene, bvh, camera, 16, 1, (0, 96))))  # noqa: B023
+    base = {k: float(np.median(x)) for k, x in runs[SHIPPED].items()}
+    rows = []
+    for v in VARIANTS:
+        speed = [base[k] / float(np.median(runs[v][k])) for k in ("incoherent", "camera", "pt")]
+        rows.append([name, f"{v[0]:g}", leaf_cost(v), str(built[v][1]), str(built[v][2]),
+                     *(f"{s:.3f}" for s in speed)])  # fmt: skip
+        print(" | ".join(rows[-1]), flush=True)
+    return rows
+
+
+def main() -> None:
+    """Time every variant on the scenes named (default: every example), write the table."""
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("scenes", nargs="*", default=[p.stem for p in EXAMPLES])
+    a = p.parse_args()
+    numba.set_num_threads(1)
+    rows = [row for name in a.scenes for row in scene_rows(name)]
+    head = ["scene", "traversal cost", "leaf cost per", "nodes", "leaves",
+            "incoherent speed", "camera speed", "pt speed"]  # fmt: skip
+    means = []
+    for v in VARIANTS:
+        mine = [r for r in rows if float(r[1]) == v[0] and r[2] == leaf_cost(v)]
+        gm = [geomean([float(r[i]) for r in mine]) for i in (5, 6, 7)]
+        means.append(f"- traversal cost {v[0]:g}, leaves per {leaf_cost(v)}: geometric mean "
+                     f"speed incoherent {gm[0]:.3f}, camera {gm[1]:.3f}, "
+                     f"pt {gm[2]:.3f}")  # fmt: skip
+    TABLE.write_text("\n".join([
+        "# The BVH's SAH constants against alternatives (1 thread)",
+        "",
+        "Made by `python benchmarks/bvh_sah.py` (see its docstring): speed = the shipped "
+        "build's seconds / the variant's, medians of 5 alternating rounds on one Numba thread.",
+        f"Machine: {cpu()}; {datetime.date.today()}.",
+        "",
+        *markdown_table(head, rows),
+        "",
+        *means,
+    ]) + "\n")  # fmt: skip
+    print(TABLE.read_text())
+
+
+if __name__ == "__main__":
+    main()
