@@ -5,12 +5,14 @@
 Per example scene (default: all, the cornell box included), builds the BVH with the shipped
 SAH constants (`bvh.TRAVERSAL_COST`, leaves costed per triangle) and with the VARIANTS below,
 checks that every build returns the same closest hits, then times them in turn, round after
-round on one Numba thread (medians of ROUNDS): 200,000 incoherent rays (`test_bvh`'s), the
+round on one Numba thread (medians of ROUNDS): 200,000 incoherent rays (`test_bvh`'s kind), the
 camera's 384² primary rays, and `pt` at 96² × 16 samples per pixel. A variant's speed is the
 shipped build's seconds over its own (above 1: faster). Leaves "costed per block of 4" follow
 Embree's model for its 4-triangle leaves: a leaf of up to 4 triangles is one SIMD test, as it
-is here (`traverse.LEAF_LANES`), so it costs one unit whatever its count. Chosen on the
-examples only; writes benchmarks/results/bvh_sah.md.
+is here (`traverse.LEAF_LANES`), so it costs one unit whatever its count; with it every node
+of at most 4 triangles becomes a leaf whatever the traversal cost, so the three block variants
+build one tree and their spread is the timing noise. Chosen on the examples only; writes
+benchmarks/results/bvh_sah.md.
 """
 
 from __future__ import annotations
@@ -29,30 +31,19 @@ from dpm import load_scene
 from dpm.tracer import BVH, intersect, trace_pixels
 from dpm.tracer import bvh as B
 
-SHIPPED = (B.TRAVERSAL_COST, 1)
-VARIANTS = [SHIPPED, (1.0, 1), (3.0, 1), (2.0, 4), (1.0, 4), (0.5, 4)]  # (cost, lanes)
+SHIPPED = (B.TRAVERSAL_COST, B.LEAF_COST_LANES)
+# (traversal cost, leaf-cost lanes); the block-of-4 ones are one tree (see above)
+VARIANTS = [SHIPPED, (1.0, 1), (3.0, 1), (2.0, 4), (1.0, 4), (0.5, 4)]
 ROUNDS = 5
 TABLE = RESULTS / "bvh_sah.md"
 
 
 def build(tri: np.ndarray, cost: float, lanes: int) -> tuple[BVH, int, int]:
     """A BVH over triangles (T, 3, 3) with SAH traversal cost `cost` and leaves costed per
-    block of `lanes` triangles, its interior node count and its leaf count."""
-    tri = np.ascontiguousarray(tri, np.float32).reshape(-1, 3, 3)
-    t64 = tri.astype(np.float64)
-    bounds, child, count, order, _ = B._build(
-        t64.min(1), t64.max(1), t64.mean(1), B.N_BINS, B.MAX_LEAF, cost, lanes
-    )
-    records, levels = B._collapse(bounds, child, count)
-    nodes = B._aligned(records.shape, np.int32)
-    nodes[:] = records
-    verts = np.ascontiguousarray(tri[order].reshape(-1, 9))
-    planes = B._aligned((9, len(verts) + B.MAX_LEAF), np.float32)
-    planes[:, : len(verts)] = verts.T
-    planes[:, len(verts) :] = 0.0
-    arrays = B.BVHArrays(nodes.view(np.float32), nodes, verts, order, planes)
-    refs = records[:, B.REFS : B.REFS + B.WIDTH]
-    return B.BVH(arrays, int(levels)), len(records), int(((refs < 0) & (refs != B.EMPTY)).sum())
+    block of `lanes` triangles, its 8-wide node count and its leaf count."""
+    bvh = B.build_bvh_from_triangles(tri, traversal_cost=cost, leaf_cost_lanes=lanes)
+    refs = bvh.arrays.kids[:, B.REFS : B.REFS + B.WIDTH]
+    return bvh, bvh.n_nodes, int(((refs < 0) & (refs != B.EMPTY)).sum())
 
 
 def leaf_cost(variant: tuple[float, int]) -> str:
@@ -68,7 +59,7 @@ def seconds(fn: Callable[[], object]) -> float:
 
 
 def scene_rows(name: str) -> list[list[str]]:
-    """One table row per variant on scene `name` (the shipped build first)."""
+    """One table row per variant on scene `name`, in VARIANTS' order."""
     tri = load_triangles(name)
     scene = load_scene(PATHS[name])
     camera = scene.camera.with_resolution(96, 96)
@@ -102,12 +93,13 @@ def main() -> None:
     p.add_argument("scenes", nargs="*", default=[p.stem for p in EXAMPLES])
     a = p.parse_args()
     numba.set_num_threads(1)
-    rows = [row for name in a.scenes for row in scene_rows(name)]
-    head = ["scene", "traversal cost", "leaf cost per", "nodes", "leaves",
+    per_scene = [scene_rows(name) for name in a.scenes]
+    rows = [row for scene in per_scene for row in scene]
+    head = ["scene", "traversal cost", "leaf cost per", "8-wide nodes", "leaves",
             "incoherent speed", "camera speed", "pt speed"]  # fmt: skip
     means = []
-    for v in VARIANTS:
-        mine = [r for r in rows if float(r[1]) == v[0] and r[2] == leaf_cost(v)]
+    for i, v in enumerate(VARIANTS):
+        mine = [scene[i] for scene in per_scene]
         gm = [geomean([float(r[i]) for r in mine]) for i in (5, 6, 7)]
         means.append(f"- traversal cost {v[0]:g}, leaves per {leaf_cost(v)}: geometric mean "
                      f"speed incoherent {gm[0]:.3f}, camera {gm[1]:.3f}, "
@@ -116,7 +108,8 @@ def main() -> None:
         "# The BVH's SAH constants against alternatives (1 thread)",
         "",
         "Made by `python benchmarks/bvh_sah.py` (see its docstring): speed = the shipped "
-        "build's seconds / the variant's, medians of 5 alternating rounds on one Numba thread.",
+        f"build's seconds / the variant's, medians of {ROUNDS} alternating rounds on one Numba "
+        "thread.",
         f"Machine: {cpu()}; {datetime.date.today()}.",
         "",
         *markdown_table(head, rows),

@@ -5,7 +5,7 @@
 On the unseen-scene set (`benchmarks/scenes/make_unseen.py`; default: all of it, the two
 diffuse controls included), at the resolution W x H of each scene's Mitsuba 3 reference
 (`benchmarks/scenes/unseen_references.py`: results/unseen/NAME-WxH-mitsuba.exr, two halves of
-4096 spp; W = min(camera width, 256)) and for each budget T of --times:
+16384 spp, the controls' of 4096; W = min(camera width, 256)) and for each budget T of --times:
 
 - dpm: `dpm-render SCENE --time T --width W --height H --seed S` in a fresh process, wall
   seconds from launch to exit (`equal_time.dpm_run`).

@@ -92,6 +92,11 @@ def run_scene(name: str, set_: str, budgets: tuple[int, ...], defaults_only: boo
             "reference_passes": reference_passes,  # per half; a row is scored against these
         }
         if defaults_only:
+            if done[n].get("reference_passes") != reference_passes:
+                sys.exit(
+                    f"{name}: its settings were tuned against another reference than the "
+                    f"{reference_passes}-pass one now: delete {path} to rerun it in full"
+                )
             done[n].update(default)
             print(name, n, f"default {default['default']:.5f}", flush=True)
             save_record(path, name, set_, (width, height), noise, pixel, rows)
@@ -177,7 +182,7 @@ def markdown() -> str:
                 best = row["best"]
                 rows.append([
                     r["scene"], f"{row['paths']:,}", f"{row['caustic_photons']:,}",
-                    f"{r['noise']:.4f}", f"{row.get('reference_passes', 512)}",
+                    f"{r['noise']:.4f}", f"{row.get('reference_passes', '–')}",
                     f"{-(-row['paths'] // row['default_per_pass'])}",
                     f"{row['default']:.4f}", f"{best['rmse']:.4f}",
                     f"{best['radius'] / r['pixel_width']:.2f} px, {best['passes']} passes",

@@ -157,8 +157,10 @@ def _build(tri_lo, tri_hi, centroid, n_bins, max_leaf, traversal_cost, lanes):
                 if lc == 0 or right_count[b] == 0:
                     continue
                 left_area = _half_area(llo[0], llo[1], llo[2], lhi[0], lhi[1], lhi[2])
-                blocks_l = (lc + lanes - 1) // lanes
-                blocks_r = (right_count[b] + lanes - 1) // lanes
+                blocks_l, blocks_r = lc, right_count[b]
+                if lanes > 1:  # no divisions in the shipped build's inner loop
+                    blocks_l = (blocks_l + lanes - 1) // lanes
+                    blocks_r = (blocks_r + lanes - 1) // lanes
                 cost = traversal_cost + (blocks_l * left_area + blocks_r * right_area[b]) / max(
                     parent_area, 1e-300
                 )
@@ -263,8 +265,13 @@ def _aligned(shape: tuple[int, int], dtype) -> np.ndarray:
     return raw[start : start + size].view(dtype).reshape(shape)
 
 
-def build_bvh_from_triangles(triangles: np.ndarray) -> BVH:
-    """Build a BVH over triangles (T, 3, 3) float32 vertex positions."""
+def build_bvh_from_triangles(
+    triangles: np.ndarray,
+    traversal_cost: float = TRAVERSAL_COST,
+    leaf_cost_lanes: int = LEAF_COST_LANES,
+) -> BVH:
+    """Build a BVH over triangles (T, 3, 3) float32 vertex positions (the SAH constants are
+    for `benchmarks/bvh_sah.py`; the defaults are the shipped ones)."""
     tri = np.ascontiguousarray(triangles, dtype=np.float32).reshape(-1, 3, 3)
     if len(tri) == 0:
         raise ValueError("cannot build a BVH over zero triangles")
@@ -277,8 +284,8 @@ def build_bvh_from_triangles(triangles: np.ndarray) -> BVH:
         tri64.mean(axis=1),
         N_BINS,
         MAX_LEAF,
-        TRAVERSAL_COST,
-        LEAF_COST_LANES,
+        traversal_cost,
+        leaf_cost_lanes,
     )
     records, levels = _collapse(bounds, child, count)
     nodes = _aligned(records.shape, np.int32)
