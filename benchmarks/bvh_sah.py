@@ -19,12 +19,10 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import time
-from collections.abc import Callable
 
 import numba
 import numpy as np
-from test_bvh import EXAMPLES, PATHS, camera_rays, incoherent_rays, load_triangles
+from test_bvh import EXAMPLES, PATHS, camera_rays, incoherent_rays, load_triangles, seconds
 
 from common import RESULTS, cpu, geomean, markdown_table
 from dpm import load_scene
@@ -49,13 +47,6 @@ def build(tri: np.ndarray, cost: float, lanes: int) -> tuple[BVH, int, int]:
 def leaf_cost(variant: tuple[float, int]) -> str:
     """How a variant costs a leaf: per triangle or per block of lanes."""
     return "triangle" if variant[1] == 1 else f"block of {variant[1]}"
-
-
-def seconds(fn: Callable[[], object]) -> float:
-    """Wall seconds of one call of fn."""
-    start = time.perf_counter()
-    fn()
-    return time.perf_counter() - start
 
 
 def scene_rows(name: str) -> list[list[str]]:

@@ -272,7 +272,6 @@ def ladder_report(record: dict) -> list[str]:
     if mixed:
         lines += [f"Left out of the comparisons (rows scored against two references): "
                   f"{', '.join(mixed)}.", ""]  # fmt: skip
-        # fmt: skip
     head = ["scene", "photon paths", *LADDER_METHODS, "best"]
     table = []
     for name in dict.fromkeys(x["scene"] for x in rows):

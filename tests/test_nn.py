@@ -367,10 +367,8 @@ def test_kill_and_resume_gives_the_same_parameters(tiny: Config, monkeypatch) ->
     # Ctrl-C in the 7th draw (validation, then steps 1 … 6), on the one drawing thread (with
     # more, the 7th call could be another step's): the loop meets it when it needs step 6's
     # batch, so step 5 is the last done and saved
-    import dpm.nn.train as training
-
-    monkeypatch.setattr(training, "DRAW_THREADS", 1)
-    monkeypatch.setattr(training, "DRAW_AHEAD", 2)
+    monkeypatch.setattr("dpm.nn.train.DRAW_THREADS", 1)
+    monkeypatch.setattr("dpm.nn.train.DRAW_AHEAD", 2)
     draw, calls = Sampler.draw, []
 
     def interrupted(self, *args):
