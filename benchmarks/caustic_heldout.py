@@ -34,12 +34,18 @@ from dpm.nn.weights import load_weights
 
 def heldout_loss(
     config_path: Path, weights: list[Path], scenes: int, last: int, zs: list[float]
-) -> dict:
+) -> dict[tuple[str, float], float]:
     """{(weights file, z): loss} on scenes scenes-last … scenes-1 of the config's caustic set."""
     config = load_config(config_path)
     manifest = json.loads((Path(config.data.out) / "manifest.json").read_text())
-    n = min(scenes, len(manifest["shards"]))
-    sampler = CausticSampler(config, manifest, list(range(n - last, n)))
+    if not 0 < last <= scenes:
+        raise SystemExit("caustic_heldout: need 0 < --last ≤ --scenes")
+    held = {e["index"] for e in manifest["shards"]}
+    wanted = list(range(scenes - last, scenes))
+    if not held.issuperset(wanted):  # never fall back on other (perhaps training) scenes
+        raise SystemExit(f"caustic_heldout: {config.data.out} lacks some of scenes "
+                         f"{wanted[0]}-{wanted[-1]}")  # fmt: skip
+    sampler = CausticSampler(config, manifest, wanted)
     batch, target, part = sampler.draw(np.random.default_rng(0), len(sampler.choices), 1)
     out = {}
     for path in weights:

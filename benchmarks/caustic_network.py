@@ -1,7 +1,8 @@
 """`auto`'s learned caustic filter against `auto --no-network`, on the unseen scenes' caustics.
 
     python benchmarks/caustic_network.py [SCENE ...] [--passes 1 2 4 ...] [--times 2 4 8 16]
-                                         [--ladder N ...] [--seeds 1 2] [--report]
+                                         [--ladder N ...] [--ladder-methods M ...]
+                                         [--seeds 1 2] [--report]
 
 On each caustic scene of the unseen set (`benchmarks/scenes/make_unseen.py`, the controls
 left out), at the size of its caustic reference (`caustic_references.py`: SPPM at 2 × 512

@@ -85,7 +85,7 @@ def readable(symbol: str) -> str:
     parts, i = [], 3
     while i < len(symbol) and symbol[i].isdigit():  # <length><name> components
         j = i
-        while symbol[j].isdigit():
+        while j < len(symbol) and symbol[j].isdigit():
             j += 1
         size = int(symbol[i:j])
         parts.append(symbol[j : j + size])
@@ -93,7 +93,9 @@ def readable(symbol: str) -> str:
     return ".".join(parts) or symbol
 
 
-def profile(path: Path, spp: int, width: int) -> tuple[dict[str, float], list[tuple], float]:
+def profile(
+    path: Path, spp: int, width: int
+) -> tuple[dict[str, float], list[tuple[float, str]], float]:
     """(share of the render's CPU samples per group, the top functions as (share, name),
     render seconds) of one `pt` render of scene `path`."""
     scene = load_scene(path)
@@ -105,13 +107,18 @@ def profile(path: Path, spp: int, width: int) -> tuple[dict[str, float], list[tu
     with tempfile.TemporaryDirectory() as tmp:
         data = Path(tmp) / "perf.data"
         cmd = ["perf", "record", "-q", "-F", "1999", "-p", str(os.getpid()), "-o", str(data)]
-        perf = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        time.sleep(0.5)  # perf attaches to every thread before the render starts
-        start = time.perf_counter()
-        render(scene, options)
-        seconds = time.perf_counter() - start
-        perf.send_signal(signal.SIGINT)
-        perf.wait()
+        perf = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        try:
+            time.sleep(0.5)  # perf attaches to every thread before the render starts
+            if perf.poll() is not None:
+                sys.exit(f"path_profile: perf record failed: {perf.stderr.read().decode()}")
+            start = time.perf_counter()
+            render(scene, options)
+            seconds = time.perf_counter() - start
+        finally:
+            if perf.poll() is None:
+                perf.send_signal(signal.SIGINT)
+            perf.communicate(timeout=60)
         report = subprocess.run(
             ["perf", "report", "-i", str(data), "--no-children", "--sort", "dso,sym",
              "--stdio", "-q", "--percent-limit", "0.01"],
