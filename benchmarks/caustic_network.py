@@ -11,7 +11,8 @@ its scale-1 twin's, as `equal_time_unseen.py` does), the caustic component
 (`--component caustic`) is rendered:
 
 - at equal passes (`--passes`): in this process, the same seed with and without the network
-  (the same samples: the ratio is the filter's effect alone);
+  (the same samples: the ratio is the filter's effect alone); the report says on how many
+  scenes the network's error (mean over the seeds) falls at every step of the ladder;
 - at equal whole-process time (`--times`): `dpm-render --time T` in fresh processes, with and
   without `--no-network`, alternating which runs first budget after budget (the machine's load
   falls on both); the network's seconds and share of the run, and the passes, from the stats.
@@ -212,6 +213,20 @@ def report(record: dict) -> str:
             q = [x["network"] / x["plain"] for x in record["passes"] if x["passes"] == p]
             lines.append(f"- {p} passes: geometric mean {geomean(q):.3f}, range "
                          f"{min(q):.3f}-{max(q):.3f} over {len(q)} scenes")  # fmt: skip
+        # consistency: the network's error, mean over the seeds, at each step of the ladder
+        ladders = {}
+        for x in record["passes"]:
+            ladders.setdefault(x["scene"], []).append((x["passes"], x["network"]))
+        rises, rising = [], set()
+        for name, steps in ladders.items():
+            steps.sort()
+            for a, b in zip(steps, steps[1:], strict=False):
+                if b[1] >= a[1]:
+                    rises.append(f"{name} {a[0]} → {b[0]} passes ({a[1]:.4f} → {b[1]:.4f})")
+                    rising.add(name)
+        falls = len(ladders) - len(rising)
+        lines.append(f"- the network's error falls at every step on {falls} of {len(ladders)} "
+                     "scenes" + (f"; it rises on {'; '.join(rises)}" if rises else ""))  # fmt: skip
         lines.append("")
     if record["times"]:
         lines += [f"## Equal whole-process time (seeds {record.get('times_seeds')})", ""]
