@@ -17,18 +17,15 @@ from __future__ import annotations
 
 import argparse
 import json
-from functools import partial
 from pathlib import Path
 
-import jax
 import numpy as np
 
-from dpm.caustic.stats import CLAMP_Z, SPREAD, TRAIN_CLAMP_Z
-from dpm.nn.caustic_net import filter_caustics
-from dpm.nn.caustic_training import CausticSampler
+from dpm.caustic.stats import CLAMP_Z, TRAIN_CLAMP_Z
+from dpm.nn.caustic_training import CausticSampler, caustic_estimates
 from dpm.nn.config import load_config
-from dpm.nn.losses import training_loss
 from dpm.nn.model import make_model
+from dpm.nn.train import make_steps
 from dpm.nn.weights import load_weights
 
 
@@ -47,20 +44,14 @@ def heldout_loss(
                          f"{wanted[0]}-{wanted[-1]}")  # fmt: skip
     sampler = CausticSampler(config, manifest, wanted)
     batch, target, part = sampler.draw(np.random.default_rng(0), len(sampler.choices), 1)
-    out = {}
+    t, out = config.train, {}
     for path in weights:
         w = load_weights(path)
         model = make_model(w.architecture, w.width)
-        for z in zs:
-            one = jax.jit(jax.vmap(partial(filter_caustics, model, w.params, z=z)))
-            estimate = np.concatenate([  # image by image: the whole set at once is large
-                np.asarray(one(*(a[i : i + 8] for a in batch))).reshape(-1, 3)
-                for i in range(0, len(batch.own), 8)
-            ])  # fmt: skip
-            baseline = batch.candidates[:, SPREAD].reshape(-1, 3)
-            balance = baseline if config.train.balance else None
-            value = training_loss(estimate, target, config.train.loss, balance, part)
-            out[(str(path), z)] = float(value)
+        for z in zs:  # the training's own held-out loss, through the clamp at z
+            _, loss, _ = make_steps(model, t.learning_rate, t.loss, t.balance,
+                                    caustic_estimates(model, z))  # fmt: skip
+            out[(str(path), z)] = float(loss(w.params, batch, target, part))
     return out
 
 

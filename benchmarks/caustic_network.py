@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import itertools
 import json
 import sys
 import tempfile
@@ -220,7 +221,7 @@ def report(record: dict) -> str:
         rises, rising = [], set()
         for name, steps in ladders.items():
             steps.sort()
-            for a, b in zip(steps, steps[1:], strict=False):
+            for a, b in itertools.pairwise(steps):
                 if b[1] >= a[1]:
                     rises.append(f"{name} {a[0]} → {b[0]} passes ({a[1]:.4f} → {b[1]:.4f})")
                     rising.add(name)

@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from dpm.caustic.stats import SPREAD
+from dpm.caustic.stats import SPREAD, TRAIN_CLAMP_Z
 from dpm.data.caustic_set import load_caustic_shard
 from dpm.nn.caustic_net import filter_caustics
 from dpm.nn.config import Config
@@ -64,12 +64,12 @@ class CausticSampler:
         return batch, target.reshape(-1, 3), part
 
 
-def caustic_estimates(model) -> Callable:
-    """estimates(params, batch) -> ((N, 3) the filter's radiance, (N, 3) the render's without
-    the network: the spread candidate) over a CausticBatch's pixels, for
-    `dpm.nn.train.make_steps`."""
+def caustic_estimates(model, z: float = TRAIN_CLAMP_Z) -> Callable:
+    """estimates(params, batch) -> ((N, 3) the filter's radiance, held within z standard
+    errors of the pixel's own, (N, 3) the render's without the network: the spread candidate)
+    over a CausticBatch's pixels, for `dpm.nn.train.make_steps`."""
     one = jax.vmap(
-        lambda params, f, c, o, n, p: filter_caustics(model, params, f, c, o, n, p),
+        lambda params, f, c, o, n, p: filter_caustics(model, params, f, c, o, n, p, z),
         (None, 0, 0, 0, 0, 0),
     )
 
