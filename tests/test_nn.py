@@ -454,6 +454,7 @@ def test_weight_files_round_trip(tmp_path: Path) -> None:
         ('[data]\nout = "d"\n[train]\nbatch = 2\nscenes_per_batch = 4\n', "batch must"),
         ('[data]\nout = "d"\n[train]\nloss = "l1"\n', "loss must be one of"),
         ('[data]\nout = "d"\n[train]\nbalance = 1\n', "balance must be true or false"),
+        ('[data]\nout = "d"\n[train]\nclamp_z = 0\n', "clamp_z must be positive"),
         ('[data]\nout = "d"\nworkers = -1\n', "workers must be 0 (one per core)"),
         ('[data]\nout = "d"\nray_address = 6379\n', "ray_address must be a string"),
         ('[data]\nout = "d"\nkind = "images"\n', "kind must be 'points' or 'caustic'"),

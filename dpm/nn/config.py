@@ -45,6 +45,9 @@ class TrainConfig:
     seed: int = 0
     loss: str = "mse+relmse"  # one of LOSSES ('mu-law' is the paper's Eq. 4): see dpm.nn.losses
     balance: bool = True  # divide each (scene, budget) part's loss by PM-K's: see dpm.nn.losses
+    # caustic filter only: standard errors of the pixel's own estimate the filter may move it
+    # in training (the render holds it within dpm.caustic.stats.CLAMP_Z)
+    clamp_z: float = 2.0
 
 
 @dataclass(frozen=True)
@@ -124,6 +127,8 @@ def load_config(path: str | Path) -> Config:
     ):
         raise InputError(f"{path}: [data] passes must be positive, increasing and below "
                          "target_passes")  # fmt: skip
+    if not t.clamp_z > 0:
+        raise InputError(f"{path}: [train] clamp_z must be positive (got {t.clamp_z})")
     if not d.budgets or min(d.budgets) < 1 or not t.learning_rate > 0:
         raise InputError(f"{path}: [data] budgets and [train] learning_rate must be positive")
     for key in ("reference_paths", "reference_paths_per_pass"):

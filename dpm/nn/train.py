@@ -106,7 +106,11 @@ def train(config: Config, progress: bool = True) -> tuple[dict, list[dict]]:
     )  # fmt: skip
     run = RunFolder(config)
     model = make_model(m.architecture, m.width)
-    estimates = shape_estimates(model) if nppm else caustic_estimates(model) if caustic else None
+    estimates = None
+    if nppm:
+        estimates = shape_estimates(model)
+    elif caustic:
+        estimates = caustic_estimates(model, t.clamp_z)
     optimiser, loss, step = make_steps(model, t.learning_rate, t.loss, t.balance, estimates)
     params = devices.replicate(init_params(model, m.k, t.seed, m.architecture))
     done, params, opt_state, rows = run.restore(params, devices.replicate(optimiser.init(params)))
