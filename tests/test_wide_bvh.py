@@ -17,6 +17,7 @@ from dpm.tracer.traverse import (
     LEAF_LANES,
     _box_test,
     _entry,
+    _lane_distance,
     _leaf_test,
     _planes,
     box_constants,
@@ -348,8 +349,8 @@ def _leaf_lanes(planes, verts, first, count, ox, oy, oz, dx, dy, dz, tmax):
     simd = np.full(count, np.inf)
     scalar = np.full(count, np.inf)
     for j in range(count):
-        if m >> j & 1:
-            simd[j] = hits[1 + j]
+        if m >> j & 1 and _lane_distance(hits, j) < tmax:
+            simd[j] = _lane_distance(hits, j)
         t = hit_triangle(verts, first + j, ox, oy, oz, kx, ky, kz, sx, sy, sz, tmax)
         if t < tmax:
             scalar[j] = t

@@ -54,19 +54,31 @@ RAYS_PER_TASK = 256  # rays each parallel task traces with one traversal stack
 @nb.njit(cache=True, inline="always", error_model="numpy")
 def ray_setup(dx, dy, dz):
     """Per-ray constants of the watertight test: permuted axes and shear (Woop et al. 2013)."""
-    ax, ay, az = abs(dx), abs(dy), abs(dz)
-    # Selects, not branches: for incoherent rays the axes are random, and branches mispredict.
-    x_max = (ax > ay) & (ax > az)
-    y_max = (ay > az) & ~x_max
-    kz = np.int64(2) - 2 * np.int64(x_max) - np.int64(y_max)
+    kz = _dominant_axis(dx, dy, dz)
+    return ray_setup_inverse(dx, dy, dz, kz, 1.0 / pick(kz, dx, dy, dz))
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def ray_setup_inverse(dx, dy, dz, kz, inv):
+    """`ray_setup` given the dominant axis kz (`_dominant_axis`) and inv = 1 / d[kz]: the
+    traversals have all three inverses already, and a division costs more than the rest."""
     dkz = pick(kz, dx, dy, dz)
     flip = np.int64(dkz < 0)  # keep the winding, so front faces stay front faces
     a = kz + 1 - 3 * np.int64(kz == 2)
     b = a + 1 - 3 * np.int64(a == 2)
     kx = a + flip * (b - a)
     ky = b + flip * (a - b)
-    inv = 1.0 / dkz
     return kx, ky, kz, -pick(kx, dx, dy, dz) * inv, -pick(ky, dx, dy, dz) * inv, inv
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _dominant_axis(dx, dy, dz):
+    """0, 1 or 2: the axis of the direction's largest component (the watertight test's z)."""
+    ax, ay, az = abs(dx), abs(dy), abs(dz)
+    # Selects, not branches: for incoherent rays the axes are random, and branches mispredict.
+    x_max = (ax > ay) & (ax > az)
+    y_max = (ay > az) & ~x_max
+    return np.int64(2) - 2 * np.int64(x_max) - np.int64(y_max)
 
 
 @nb.njit(cache=True, inline="always")
@@ -230,7 +242,6 @@ def _leaf_test_codegen(context, builder, sig, args):
     pos = builder.or_(cmp("<=", tscaled, zero), cmp(">", tscaled, tdet))
     miss = builder.or_(miss, builder.and_(cmp("<", det, zero), neg))
     miss = builder.or_(miss, builder.and_(cmp(">", det, zero), pos))
-    t = builder.fdiv(tscaled, det)
     lane = ir.Constant(ir.VectorType(i64, LEAF_LANES), list(range(LEAF_LANES)))
     counts = builder.insert_element(
         ir.Constant(ir.VectorType(i64, LEAF_LANES), ir.Undefined), count, ir.Constant(i32, 0)
@@ -239,25 +250,35 @@ def _leaf_test_codegen(context, builder, sig, args):
         counts, counts, ir.Constant(ir.VectorType(i32, LEAF_LANES), [0] * LEAF_LANES)
     )
     live = builder.icmp_signed("<", lane, counts)
-    hit = builder.and_(builder.and_(live, builder.not_(miss)), cmp("<", t, ftmax))
+    hit = builder.and_(live, builder.not_(miss))
     mask = builder.uitofp(builder.zext(builder.bitcast(hit, ir.IntType(LEAF_LANES)), i64), f64)
-    lanes = [builder.extract_element(t, ir.Constant(i32, c)) for c in range(LEAF_LANES)]
+    lanes = [builder.extract_element(v, ir.Constant(i32, c)) for v in (tscaled, det)
+             for c in range(LEAF_LANES)]  # fmt: skip
     return context.make_tuple(builder, sig.return_type, [mask, *lanes])
 
 
 @intrinsic
 def _leaf_test(typingctx, planes, first, count, kx, ky, kz, okx, oky, okz, sx, sy, sz, tmax):
-    """(mask, t_0, ..., t_LEAF_LANES-1): `hit_triangle` for triangles first ... first + count - 1
-    (count ≤ LEAF_LANES) at once, from the plane-major copy `tri_planes` of their vertices.
-
-    okx, oky, okz are the ray origin's coordinates kx, ky, kz. Bit j of mask (a float64
-    holding a small integer) is set where triangle first + j is hit strictly before tmax, at
-    distance t_j; per lane the float64 operations are those of `hit_triangle`, in its order.
+    """(mask, n_0, ..., n_LEAF_LANES-1, d_0, ..., d_LEAF_LANES-1): `hit_triangle` for
+    triangles first ... first + count - 1 (count ≤ LEAF_LANES) at once, from the plane-major
+    copy `tri_planes` of their vertices, all but its last step: bit j of mask (a float64
+    holding a small integer) is set where triangle first + j may be hit at distance
+    t_j = n_j / d_j in (0, tmax], and `_lane_distance` gives t_j. The division is left to the
+    few lanes the caller needs: most leaf tests hit nothing, and a 4-lane division is the
+    test's slowest operation. okx, oky, okz are the ray origin's coordinates kx, ky, kz; per
+    lane the float64 operations are those of `hit_triangle`, in its order.
     """
-    sig = types.UniTuple(types.float64, LEAF_LANES + 1)(
+    sig = types.UniTuple(types.float64, 2 * LEAF_LANES + 1)(
         planes, first, count, kx, ky, kz, okx, oky, okz, sx, sy, sz, tmax
     )
     return sig, _leaf_test_codegen
+
+
+@nb.njit(cache=True, inline="always")
+def _lane_distance(hits, c):
+    """Lane c's distance t_c of a `_leaf_test` result (its last step, the division; IEEE
+    division rounds the same in a scalar as in a vector lane)."""
+    return hits[1 + c] / hits[1 + LEAF_LANES + c]
 
 
 @intrinsic
@@ -405,9 +426,10 @@ def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     `bvh` is a BVHArrays; `stack` is scratch from `new_stack`.
     """
     bounds, kids, planes = bvh.bounds, bvh.kids, bvh.tri_planes
-    kx, ky, kz, sx, sy, sz = ray_setup(dx, dy, dz)
-    o = (pick(kx, ox, oy, oz), pick(ky, ox, oy, oz), pick(kz, ox, oy, oz))
     ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
+    kz = _dominant_axis(dx, dy, dz)
+    kx, ky, kz, sx, sy, sz = ray_setup_inverse(dx, dy, dz, kz, pick(kz, ix, iy, iz))
+    o = (pick(kx, ox, oy, oz), pick(ky, ox, oy, oz), pick(kz, ox, oy, oz))
     nx, ny, nz, fx, fy, fz = _planes(ix, iy, iz)
     ray = box_constants(ox, oy, oz, ix, iy, iz)
     best_t, best = tmax, -1
@@ -458,12 +480,12 @@ def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
             hits = _leaf_test(planes, first, code & _COUNT, kx, ky, kz, *o, sx, sy, sz, best_t)
             m = int(hits[0])
             if m != 0:
-                ts = hits[1:]
                 while m != 0:  # lanes in triangle order: the first of equal nearest ones wins
                     c = _lowest_bit(m)
                     m &= m - 1
-                    if ts[c] < best_t:
-                        best_t, best = ts[c], first + c
+                    t = _lane_distance(hits, c)
+                    if t < best_t:
+                        best_t, best = t, first + c
                 far = _float32_up(best_t * _CULL_SCALE)
                 cull = _bits32(far)
         # Pop the next subtree that may still hold a nearer hit.
@@ -482,9 +504,10 @@ def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
 def any_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     """True if the ray hits any triangle at a distance in (0, tmax)."""
     bounds, kids, planes = bvh.bounds, bvh.kids, bvh.tri_planes
-    kx, ky, kz, sx, sy, sz = ray_setup(dx, dy, dz)
-    o = (pick(kx, ox, oy, oz), pick(ky, ox, oy, oz), pick(kz, ox, oy, oz))
     ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
+    kz = _dominant_axis(dx, dy, dz)
+    kx, ky, kz, sx, sy, sz = ray_setup_inverse(dx, dy, dz, kz, pick(kz, ix, iy, iz))
+    o = (pick(kx, ox, oy, oz), pick(ky, ox, oy, oz), pick(kz, ox, oy, oz))
     nx, ny, nz, fx, fy, fz = _planes(ix, iy, iz)
     ray = box_constants(ox, oy, oz, ix, iy, iz)
     far = _float32_up(tmax * _CULL_SCALE)
@@ -504,10 +527,13 @@ def any_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
                 continue
             code = ~ref
             first = code >> LEAF_BITS
-            # Hits count only strictly before tmax (hit_triangle admits t == tmax).
             hits = _leaf_test(planes, first, code & _COUNT, kx, ky, kz, *o, sx, sy, sz, tmax)
-            if hits[0] != 0:
-                return True
+            lanes = int(hits[0])
+            while lanes != 0:  # hits count only strictly before tmax (hit_triangle admits tmax)
+                lane = _lowest_bit(lanes)
+                lanes &= lanes - 1
+                if _lane_distance(hits, lane) < tmax:
+                    return True
     return False
 
 
