@@ -21,6 +21,7 @@ from dpm.tracer.traverse import (
     _leaf_test,
     _planes,
     box_constants,
+    box_constants_simd,
     hit_box,
     hit_triangle,
     new_stack,
@@ -144,6 +145,37 @@ def test_closed_mesh_from_inside_matches_brute_force_exactly() -> None:
     o = rng.uniform(-0.6, 0.6, (40_000, 3))
     d = rng.normal(size=(40_000, 3))
     assert_same_as_brute_force(tri, o, d)
+
+
+@nb.njit(error_model="numpy")
+def _both_constants(o, d):
+    """Bits of `box_constants` and `box_constants_simd` for each ray (R, 3): (R, 12) twice."""
+    scalar = np.empty((len(o), 12), np.float32)
+    simd = np.empty((len(o), 12), np.float32)
+    for r in range(len(o)):
+        ix, iy, iz = 1.0 / d[r, 0], 1.0 / d[r, 1], 1.0 / d[r, 2]
+        a = box_constants(o[r, 0], o[r, 1], o[r, 2], ix, iy, iz)
+        b = box_constants_simd(o[r, 0], o[r, 1], o[r, 2], ix, iy, iz)
+        for k in range(12):
+            scalar[r, k], simd[r, k] = a[k], b[k]
+    return scalar.view(np.int32), simd.view(np.int32)
+
+
+def test_simd_box_constants_equal_the_scalar_ones_bit_for_bit() -> None:
+    """The traversals' per-ray constants, three axes in SIMD lanes, are `box_constants`'s
+    exactly, NaNs included, over ordinary rays and the cases that leave an axis out: zero
+    and signed-zero direction components, tiny and huge ones, origins 1e30 away."""
+    rng = np.random.default_rng(5)
+    o = rng.normal(size=(20_000, 3)) * 10.0 ** rng.integers(-3, 6, (20_000, 1))
+    d = rng.normal(size=(20_000, 3))
+    special = np.array([0.0, -0.0, 1e-35, -1e-35, 1e-300, 1e35, 3e38, np.inf, 1.0])
+    mask = rng.uniform(size=d.shape) < 0.3
+    d[mask] = rng.choice(special, mask.sum())
+    o[rng.uniform(size=o.shape) < 0.05] = 1e30
+    d[np.all(d == 0, axis=1), 2] = 1.0
+    scalar, simd = _both_constants(o, d)
+    np.testing.assert_array_equal(simd, scalar)
+    assert np.isnan(scalar.view(np.float32)).any()  # the left-out axes were exercised
 
 
 @nb.njit(error_model="numpy")

@@ -346,6 +346,62 @@ def box_constants(ox, oy, oz, ix, iy, iz):
     return nx, cnx, fx, cfx, ny, cny, fy, cfy, nz, cnz, fz, cfz
 
 
+def _box_constants_codegen(context, builder, sig, args):
+    """LLVM IR of `box_constants_simd`: `box_constants` with the three axes in the lanes of
+    one 4 × float64 vector (the fourth idle), the same operations per lane in the same order
+    (no fused multiply-adds: LLVM contracts nothing without fast-math flags)."""
+    f32, f64, i32 = ir.FloatType(), ir.DoubleType(), ir.IntType(32)
+    v64, v32 = ir.VectorType(f64, 4), ir.VectorType(f32, 4)
+    ox, oy, oz, ix, iy, iz = args
+
+    def vector(values):
+        v = ir.Constant(v64, [0.0] * 4)
+        for lane, x in enumerate(values):
+            v = builder.insert_element(v, x, ir.Constant(i32, lane))
+        return v
+
+    def const(x):
+        return ir.Constant(v64, [x] * 4)
+
+    fabs = cgutils.get_or_insert_function(
+        builder.module, ir.FunctionType(v64, [v64]), "llvm.fabs.v4f64"
+    )
+    o, inv = vector([ox, oy, oz]), vector([ix, iy, iz, ir.Constant(f64, 1.0)])
+    near = builder.fptrunc(builder.fmul(inv, const(1.0 - _SHRINK)), v32)
+    far = builder.fptrunc(builder.fmul(inv, const(1.0 + _SHRINK)), v32)
+    x = builder.fmul(o, builder.fpext(near, v64))
+    near_term = builder.fadd(
+        builder.fadd(x, builder.fmul(const(_ROUND_SLACK), builder.call(fabs, [x]))), const(1e-37)
+    )
+    y = builder.fmul(o, builder.fpext(far, v64))
+    far_term = builder.fsub(
+        builder.fsub(y, builder.fmul(const(_ROUND_SLACK), builder.call(fabs, [y]))), const(1e-37)
+    )
+    size = builder.call(fabs, [inv])
+    keep = builder.and_(
+        builder.fcmp_ordered(">=", size, const(_MIN_SCALE)),
+        builder.fcmp_ordered("<=", size, const(_MAX_SCALE)),
+    )
+    reach = builder.fmul(builder.call(fabs, [o]), size)
+    keep = builder.and_(keep, builder.fcmp_ordered("<=", reach, const(_MAX_SCALE)))
+    keep = builder.or_(keep, builder.fcmp_ordered("==", size, const(np.inf)))
+    nan = ir.Constant(v32, [float("nan")] * 4)
+    columns = [
+        builder.select(keep, v, nan)
+        for v in (near, builder.fptrunc(near_term, v32), far, builder.fptrunc(far_term, v32))
+    ]
+    out = [builder.extract_element(c, ir.Constant(i32, axis)) for axis in range(3) for c in columns]
+    return context.make_tuple(builder, sig.return_type, out)
+
+
+@intrinsic
+def box_constants_simd(typingctx, ox, oy, oz, ix, iy, iz):
+    """`box_constants` (float64 arguments), the three axes computed at once in SIMD lanes:
+    equal to it bit for bit (tested), in a third of the instructions."""
+    sig = types.UniTuple(types.float32, 12)(*[types.float64] * 6)
+    return sig, _box_constants_codegen
+
+
 @nb.njit(cache=True, inline="always", error_model="numpy")
 def _axis_constants(o, inv):
     """(near scale, near term, far scale, far term) of one axis for `box_constants`, all NaN
@@ -431,7 +487,7 @@ def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     kx, ky, kz, sx, sy, sz = ray_setup_inverse(dx, dy, dz, kz, pick(kz, ix, iy, iz))
     o = (pick(kx, ox, oy, oz), pick(ky, ox, oy, oz), pick(kz, ox, oy, oz))
     nx, ny, nz, fx, fy, fz = _planes(ix, iy, iz)
-    ray = box_constants(ox, oy, oz, ix, iy, iz)
+    ray = box_constants_simd(ox, oy, oz, ix, iy, iz)
     best_t, best = tmax, -1
     far = _float32_up(best_t * _CULL_SCALE)
     cull = _bits32(far)
@@ -509,7 +565,7 @@ def any_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     kx, ky, kz, sx, sy, sz = ray_setup_inverse(dx, dy, dz, kz, pick(kz, ix, iy, iz))
     o = (pick(kx, ox, oy, oz), pick(ky, ox, oy, oz), pick(kz, ox, oy, oz))
     nx, ny, nz, fx, fy, fz = _planes(ix, iy, iz)
-    ray = box_constants(ox, oy, oz, ix, iy, iz)
+    ray = box_constants_simd(ox, oy, oz, ix, iy, iz)
     far = _float32_up(tmax * _CULL_SCALE)
     stack[0, 0] = 0
     sp = 1
