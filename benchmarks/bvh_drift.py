@@ -33,7 +33,7 @@ LOOP = 20_000_000  # iterations of the scalar loop
 
 @numba.njit(cache=True)
 def scalar_loop(n: int) -> float:
-    """n dependent multiply-adds: a rate set by the core's clock alone."""
+    """n dependent multiply-adds (every third a subtraction): a rate set by the clock alone."""
     x = 1.0
     for i in range(n):
         x = x * 1.0000001 + 1e-9 if i % 3 else x - 1e-9

@@ -75,6 +75,8 @@ def main() -> None:
     p.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
     p.add_argument("--z", type=float, nargs="+", default=[0.5, 1.0, 1.5, 2.0, 3.0])
     a = p.parse_args()
+    if min(a.z) <= 0:  # -z keys the reference held at z
+        p.error("--z values must be positive")
     start = time.monotonic()
     rows = run(a.passes, a.seeds, a.z)
     keys = [*a.z, *[-z for z in a.z]]  # the filter at each Z, then the reference held at each

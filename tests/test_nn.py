@@ -603,3 +603,15 @@ def test_threads_drawing_ahead_change_nothing(tiny: Config, monkeypatch) -> None
         runs.append(train(config, progress=False)[0])
     for a, b in zip(*(jax.tree.leaves(r) for r in runs), strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_a_run_keeps_its_identity_when_clamp_z_is_left_at_its_default(tiny: Config) -> None:
+    """Run folders from before `[train] clamp_z` still resume: the key joins a run's identity
+    only where it is set away from its default on the caustic filter, the one it changes."""
+    from dpm.nn.run_folder import _identity
+
+    assert "clamp_z" not in _identity(tiny)["train"]
+    other = replace(tiny, train=replace(tiny.train, clamp_z=1.0))
+    assert "clamp_z" not in _identity(other)["train"]  # not the caustic architecture
+    caustic = replace(other, model=replace(other.model, architecture="caustic"))
+    assert _identity(caustic)["train"]["clamp_z"] == 1.0

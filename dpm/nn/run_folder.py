@@ -30,6 +30,8 @@ def _identity(config: Config) -> dict:
         t.pop(key)
     if not t["balance"]:  # runs from before the option keep their identity
         t.pop("balance")
+    if t["clamp_z"] == 2.0 or config.model.architecture != "caustic":  # likewise; unused
+        t.pop("clamp_z")
     data = {**config.data.identity(), "scenes": config.data.scenes}  # fixes the split
     return {"data": data, "model": asdict(config.model), "train": t}
 

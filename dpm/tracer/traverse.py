@@ -263,8 +263,9 @@ def _leaf_test(typingctx, planes, first, count, kx, ky, kz, okx, oky, okz, sx, s
     triangles first ... first + count - 1 (count ≤ LEAF_LANES) at once, from the plane-major
     copy `tri_planes` of their vertices, all but its last step: bit j of mask (a float64
     holding a small integer) is set where triangle first + j may be hit at distance
-    t_j = n_j / d_j in (0, tmax], and `_lane_distance` gives t_j. The division is left to the
-    few lanes the caller needs: most leaf tests hit nothing, and a 4-lane division is the
+    t_j = n_j / d_j (`_lane_distance`), which the caller still compares with tmax: rounding
+    and non-finite inputs can set a bit whose t_j is not below it. The division is left to
+    the few lanes the caller needs: most leaf tests hit nothing, and a 4-lane division is the
     test's slowest operation. okx, oky, okz are the ray origin's coordinates kx, ky, kz; per
     lane the float64 operations are those of `hit_triangle`, in its order.
     """
@@ -396,8 +397,8 @@ def _box_constants_codegen(context, builder, sig, args):
 
 @intrinsic
 def box_constants_simd(typingctx, ox, oy, oz, ix, iy, iz):
-    """`box_constants` (float64 arguments), the three axes computed at once in SIMD lanes:
-    equal to it bit for bit (tested), in a third of the instructions."""
+    """`box_constants`, the three axes computed at once in SIMD lanes (float32 arguments are
+    promoted): equal to it bit for bit (tested)."""
     sig = types.UniTuple(types.float32, 12)(*[types.float64] * 6)
     return sig, _box_constants_codegen
 
