@@ -33,6 +33,7 @@ from dpm.tracer import (
     trace_pixels,
     trace_visible_points,
 )
+from dpm.tracer.sampling import sequence_seed
 
 __all__ = ["RenderOptions", "RenderResult", "render"]
 
@@ -133,6 +134,7 @@ def _render(scene: Scene, options: RenderOptions, started: float) -> RenderResul
     elif full:
         watch.add("path", 0.0)
     hits = dropped = 0
+    sequence = (sequence_seed(options.seed), 0)  # each pixel's spp samples stratified
     cs = cls.caustic_samples(options)
     blocks = full or cls.at_points
     show = options.progress and rows_per_step < h
@@ -142,8 +144,9 @@ def _render(scene: Scene, options: RenderOptions, started: float) -> RenderResul
             if not cls.at_points:  # path tracing alone: whole pixels in one pass, no arrays
                 with watch("path"):
                     part, a, n, found, bad = trace_pixels(
-                        scene, bvh, camera, spp, options.seed, (row0, row1), cls.path_caustics
-                    )
+                        scene, bvh, camera, spp, options.seed, (row0, row1), cls.path_caustics,
+                        sequence,
+                    )  # fmt: skip
                 image[row0:row1] += part
                 if denoised:
                     albedo[row0:row1], normal[row0:row1] = a, n
@@ -151,12 +154,14 @@ def _render(scene: Scene, options: RenderOptions, started: float) -> RenderResul
                 bar.update(row1 - row0)
                 continue
             with watch("visible_points"):
-                points = trace_visible_points(scene, bvh, camera, spp, options.seed, (row0, row1))
+                points = trace_visible_points(
+                    scene, bvh, camera, spp, options.seed, (row0, row1), sequence
+                )
             radiance = np.zeros((len(points), 3), np.float32)
             if full:
                 with watch("shade"):
                     reflected, bad = shade(
-                        scene, bvh, points, options.seed, caustics=cls.path_caustics
+                        scene, bvh, points, options.seed, cls.path_caustics, None, sequence, spp
                     )
                     radiance += points.emitted + points.throughput * reflected
                 dropped += bad

@@ -99,16 +99,19 @@ def test_a_tiny_budget_renders_one_pass(glass) -> None:
 
 
 def test_the_budget_stops_before_the_pass_that_would_overrun_it(glass, monkeypatch) -> None:
-    # The clock is read before the first pass and after each: with a 0.1 s tick a pass
-    # lasts 0.1 s and pass j ends at 0.1 (j + 1). The render must stop after the first pass
-    # whose successor would end past the budget less the finishing reserve.
+    # The clock is read before the first pass and after each, and in the first pass also
+    # after loading its kernels and around what runs once (the plan), whose time is left
+    # out of the pass's: with a 0.1 s tick the first pass counts 0.2 s, each later one 0.1,
+    # and pass j ends at 0.4 + 0.1 j. The render must stop after the first pass whose
+    # successor would end past the budget less the finishing reserve.
     monkeypatch.setattr(auto, "time", FakeClock(0.1))
     budget = 2.0
     finish = auto.FINISH_SECONDS + auto.FINISH_SECONDS_PER_PIXEL * 24 * 16
     result = render(glass, options(time=budget), started=0.0)
-    expected = next(j for j in range(1, 100) if 0.1 * (j + 1) + 0.1 + finish > budget)
+    expected = next(j for j in range(2, 100) if 0.4 + 0.1 * j + 0.1 + finish > budget)
     assert result.stats["passes"] == expected
-    assert 0.1 * (expected + 1) + finish <= budget  # the last pass ended inside the budget
+    assert result.stats["pass_seconds"] == pytest.approx(0.2)
+    assert 0.4 + 0.1 * expected + finish <= budget  # the last pass ended inside the budget
 
 
 def test_a_budgeted_render_is_reproduced_by_its_pass_count(glass, monkeypatch) -> None:

@@ -27,6 +27,7 @@ from dpm.tracer import (
     trace_visible_points,
 )
 from dpm.tracer import path as path_module
+from dpm.tracer.sampling import sequence_seed
 
 EXAMPLES = Path(__file__).parent.parent / "examples" / "scenes"
 
@@ -82,14 +83,15 @@ def test_pt_and_pt_nocaustic_share_visible_points_and_random_numbers(scene_path:
 def test_whole_pixel_tracing_equals_visible_points_then_shading() -> None:
     # pt renders whole pixels in one kernel; it must be the two-stage path's samples exactly
     # (glass, a light seen directly and through glass, misses), up to float rounding.
+    # Also with the pixels' stratified sequences (from sample 6 on, as a later pass's).
     scene = load_scene(EXAMPLES / "glass_egg.obj")
     bvh, camera, spp = build_bvh(scene), scene.camera.with_resolution(24, 20), 4
-    for caustics in (True, False):
+    for caustics, sequence in ((True, None), (False, None), (True, (9, 6)), (False, (9, 6))):
         image, albedo, normal, hits, bad = trace_pixels(
-            scene, bvh, camera, spp, 5, (3, 17), caustics
+            scene, bvh, camera, spp, 5, (3, 17), caustics, sequence
         )
-        points = trace_visible_points(scene, bvh, camera, spp, 5, (3, 17))
-        reflected, dropped = shade(scene, bvh, points, 5, caustics)
+        points = trace_visible_points(scene, bvh, camera, spp, 5, (3, 17), sequence)
+        reflected, dropped = shade(scene, bvh, points, 5, caustics, None, sequence, spp)
         per_sample = [points.emitted + points.throughput * reflected, *guides(points)]
         for got, want in zip((image, albedo, normal), per_sample, strict=True):
             want = want.astype(np.float64).reshape(14, 24, spp, 3).mean(axis=2)
@@ -124,7 +126,8 @@ def test_caustic_component_is_the_estimate_times_the_camera_throughput() -> None
     caustic = render(scene, opts)
     assert caustic.stats["caustic_photons"] > 20 and caustic.image.max() > 0
     bvh = build_bvh(scene)
-    points = trace_visible_points(scene, bvh, scene.camera.with_resolution(16, 16), 2, 2, (0, 16))
+    camera, sequence = scene.camera.with_resolution(16, 16), (sequence_seed(2), 0)
+    points = trace_visible_points(scene, bvh, camera, 2, 2, (0, 16), sequence)  # the render's
     photons = trace_photons(scene, bvh, 50_000, seed=2, caustic_only=True)
     expected = points.throughput * PM(k=20).estimate(points, photons)
     np.testing.assert_allclose(caustic.image, expected.reshape(16, 16, 2, 3).mean(axis=2))

@@ -20,9 +20,13 @@ from dpm.camera import Camera
 from dpm.scene import DIFFUSE, Scene
 from dpm.tracer.bsdf import scatter_specular, specular_survival
 from dpm.tracer.bvh import BVH
-from dpm.tracer.lights import light_pdf_solid_angle, sample_light_point
+from dpm.tracer.lights import (
+    light_pdf_solid_angle,
+    sample_light_point,
+    sample_light_stratified,
+)
 from dpm.tracer.photon_grid import PhotonGrid, grid_irradiance
-from dpm.tracer.sampling import sample_cosine, uniform
+from dpm.tracer.sampling import pixel_sequence, sample_cosine, stratified2, uniform
 from dpm.tracer.surface import albedo_at, next_surface
 from dpm.tracer.traverse import any_hit, new_stack, spawn_offset
 from dpm.tracer.visible import (
@@ -39,6 +43,9 @@ RR_START = 3  # vertices before Russian roulette may end a path
 RR_SURVIVAL = 0.95  # the most likely survival of Russian roulette at a diffuse vertex
 DIMS_PER_VERTEX = 8  # Fresnel, light pick, light point (2), direction (2), roulette, spare
 SAMPLES_PER_TASK = 64
+# Vertices after the visible point whose light sample and direction come from the pixel's
+# stratified sequence (`stratified2`) when one is given; later ones from `uniform`.
+STRATIFIED_VERTICES = 1
 PATHS_PER_TASK = 1024  # the most camera paths of one pixel in one task of `trace_listed`
 
 
@@ -71,21 +78,26 @@ def _unoccluded(bvh, ax, ay, az, bx, by, bz, stack):
 # functions it calls (`closest_hit`, `any_hit`) are compiled with it as well.
 @nb.njit(cache=True, _nrt=False, error_model="numpy")
 def shade_one(
-    bvh, sc, seed, stream, eps, caustics, grid, stack, px, py, pz, nx, ny, nz, ar, ag, ab
+    bvh, sc, seed, stream, pseq, index, eps, caustics, grid, stack, px, py, pz, nx, ny, nz,
+    ar, ag, ab,
 ):  # fmt: skip
     """RGB radiance reflected by the diffuse point p (normal n towards the viewer, albedo a)."""
     return shade_path(
-        bvh, sc, seed, stream, eps, caustics, grid, stack, px, py, pz, nx, ny, nz, ar, ag, ab
-    )
+        bvh, sc, seed, stream, pseq, index, eps, caustics, grid, stack, px, py, pz, nx, ny, nz,
+        ar, ag, ab,
+    )  # fmt: skip
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
 def shade_path(
-    bvh, sc, seed, stream, eps, caustics, grid, stack, px, py, pz, nx, ny, nz, ar, ag, ab
+    bvh, sc, seed, stream, pseq, index, eps, caustics, grid, stack, px, py, pz, nx, ny, nz,
+    ar, ag, ab,
 ):  # fmt: skip
     """`shade_one`, inlined where its callers are compiled. With a PhotonGrid `grid` (None:
     none), the light that reaches the diffuse vertices after p through specular chains is
-    its density estimate there instead of BSDF-sampled S+ L ends."""
+    its density estimate there instead of BSDF-sampled S+ L ends. With index ≥ 0, the first
+    STRATIFIED_VERTICES vertices' light points and directions are point `index` of the
+    pixel's stratified sequence `pseq` (`pixel_sequence`); other decisions come from stream."""
     inv_pi = 1.0 / math.pi
     lr = lg = lb = 0.0
     br, bg, bb = ar, ag, ab  # path weight including the BSDF·cos/pdf of the current vertex
@@ -100,10 +112,16 @@ def shade_path(
             lg += bg * eg * inv_pi
             lb += bb * eb * inv_pi
         # Next-event estimation: one point on the lights, weighted against BSDF sampling.
-        lt, qx, qy, qz, area_pdf = sample_light_point(
-            sc, uniform(seed, stream, dim + 1), uniform(seed, stream, dim + 2),
-            uniform(seed, stream, dim + 3),
-        )  # fmt: skip
+        if index >= 0 and vertex < STRATIFIED_VERTICES:
+            u2, u3 = stratified2(index, pseq, 1 + 2 * vertex)
+            u4, u5 = stratified2(index, pseq, 2 + 2 * vertex)
+            lt, qx, qy, qz, area_pdf = sample_light_stratified(sc, u2, u3)
+        else:
+            u4, u5 = uniform(seed, stream, dim + 4), uniform(seed, stream, dim + 5)
+            lt, qx, qy, qz, area_pdf = sample_light_point(
+                sc, uniform(seed, stream, dim + 1), uniform(seed, stream, dim + 2),
+                uniform(seed, stream, dim + 3),
+            )  # fmt: skip
         wx, wy, wz = qx - px, qy - py, qz - pz
         dist = math.sqrt(wx * wx + wy * wy + wz * wz)
         if dist > 0 and area_pdf > 0:
@@ -127,9 +145,7 @@ def shade_path(
             if uniform(seed, stream, dim + 6) >= q:
                 break
             br, bg, bb = br / q, bg / q, bb / q
-        dx, dy, dz = sample_cosine(
-            nx, ny, nz, uniform(seed, stream, dim + 4), uniform(seed, stream, dim + 5)
-        )
+        dx, dy, dz = sample_cosine(nx, ny, nz, u4, u5)
         pdf_b = max(dx * nx + dy * ny + dz * nz, 0.0) * inv_pi
         ox, oy, oz = px + eps * nx, py + eps * ny, pz + eps * nz
         specular = 0  # specular vertices since the last diffuse one
@@ -178,9 +194,12 @@ def shade_path(
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
 def shade_kernel(
-    bvh, depth, sc, position, normal, albedo, hit, sample, seed, eps, caustics, grid, out
+    bvh, depth, sc, position, normal, albedo, hit, pixel, sample, seed, sequence, first, spp,
+    eps, caustics, grid, out,
 ):  # fmt: skip
-    """Reflected radiance (N, 3) of visible points into out; returns the non-finite count."""
+    """Reflected radiance (N, 3) of visible points into out; returns the non-finite count.
+    With sequence ≥ 0, sample pixel·spp + s of a pixel takes point first + s of its
+    stratified sequence (`shade_path`)."""
     n = len(hit)
     n_tasks = (n + SAMPLES_PER_TASK - 1) // SAMPLES_PER_TASK
     bad = np.zeros(n_tasks, np.int64)
@@ -190,8 +209,12 @@ def shade_kernel(
             out[i] = 0.0
             if not hit[i]:
                 continue
+            pseq, index = np.uint64(0), np.int64(-1)
+            if sequence >= 0:
+                pseq = pixel_sequence(sequence, pixel[i])
+                index = first + sample[i] - np.int64(pixel[i]) * spp
             r, g, b = shade_one(
-                bvh, sc, seed, sample[i], eps, caustics, grid, stack,
+                bvh, sc, seed, sample[i], pseq, index, eps, caustics, grid, stack,
                 position[i, 0], position[i, 1], position[i, 2],
                 normal[i, 0], normal[i, 1], normal[i, 2],
                 albedo[i, 0], albedo[i, 1], albedo[i, 2],
@@ -210,40 +233,52 @@ def shade(
     seed: int,
     caustics: bool = True,
     grid: PhotonGrid | None = None,
+    sequence: tuple[int, int] | None = None,
+    spp: int = 1,
 ) -> tuple[np.ndarray, int]:
     """Radiance (N, 3) float32 each visible point reflects towards the camera (before the
     camera-path throughput), and how many non-finite samples were dropped (set to zero).
 
     caustics=False leaves out the S+ L ends at the visible point (pt-nocaustic); with it, a
     grid of the pass's caustic photons (L S+ D) also takes the place of the S+ L ends at the
-    later diffuse vertices, by its density estimate there.
+    later diffuse vertices, by its density estimate there. With `sequence` (seed, first), the
+    points of `trace_visible_points(..., spp, ..., sequence)` take their first vertices' light
+    samples and directions from their pixels' stratified sequences (`stratified2`).
     """
     if grid is not None and caustics:
         raise ValueError("a photon grid replaces caustic paths: it needs caustics=False")
     out = np.zeros((len(points), 3), np.float32)
+    qseed, first = (-1, 0) if sequence is None else sequence
     bad = shade_kernel(
         bvh.arrays, bvh.depth, scene.kernel_arrays(), points.position, points.normal,
-        points.albedo, points.hit, points.sample, seed, spawn_offset(scene), caustics, grid,
-        out,
+        points.albedo, points.hit, points.pixel, points.sample, seed, qseed, first, spp,
+        spawn_offset(scene), caustics, grid, out,
     )  # fmt: skip
     return out, int(bad)
 
 
 @nb.njit(cache=True, _nrt=False, error_model="numpy")
 def path_pixel(
-    bvh, sc, cam, width, height, pix, first, spp, stride, seed, eps, caustics, emission, grid,
-    stack,
+    bvh, sc, cam, width, height, pix, first, spp, stride, seed, sequence, qfirst, eps,
+    caustics, emission, grid, stack,
 ):  # fmt: skip
     """Sums over spp camera paths of pixel pix (row-major index), random streams pix·stride
     + first … first+spp-1: (radiance r, g, b, denoiser albedo r, g, b and normal x, y, z,
     visible points found, non-finite samples, sum of each path's squared luminance); with
-    emission False, the light seen along the camera's specular chain is left out."""
+    emission False, the light seen along the camera's specular chain is left out. With
+    sequence ≥ 0, path s's position in the pixel and its first vertices' light samples and
+    directions are point qfirst + s of the pixel's stratified sequence (`stratified2`)."""
     y, x = pix // width, pix % width
+    pseq = pixel_sequence(max(sequence, 0), pix)
     sr = sg = sb = gr = gg = gb = hx = hy = hz = sq = 0.0
     hits = bad = 0
     for s in range(spp):
         stream = pix * stride + first + s
-        sx, sy = uniform(seed, stream, 0), uniform(seed, stream, 1)
+        index = qfirst + s if sequence >= 0 else np.int64(-1)
+        if index >= 0:
+            sx, sy = stratified2(index, pseq, 0)
+        else:
+            sx, sy = uniform(seed, stream, 0), uniform(seed, stream, 1)
         v = camera_sample(bvh, sc, cam, width, height, x, y, sx, sy, stream, seed, eps, stack)
         er, eg, eb = v[13], v[14], v[15]
         if not emission:
@@ -251,7 +286,7 @@ def path_pixel(
         if v[0]:
             hits += 1
             r, g, b = shade_path(
-                bvh, sc, seed, stream, eps, caustics, grid, stack,
+                bvh, sc, seed, stream, pseq, index, eps, caustics, grid, stack,
                 v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], v[9],
             )  # fmt: skip
             if math.isfinite(r) and math.isfinite(g) and math.isfinite(b):
@@ -274,7 +309,7 @@ def path_pixel(
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
 def pixels_kernel(
-    bvh, depth, sc, cam, width, height, row0, row1, spp, seed, eps, caustics,
+    bvh, depth, sc, cam, width, height, row0, row1, spp, seed, sequence, first, eps, caustics,
     image, albedo, normal,
 ):  # fmt: skip
     """Per pixel of image rows row0..row1-1 (row-major, (P, 3) outputs): the mean radiance of
@@ -292,8 +327,8 @@ def pixels_kernel(
         stack = new_stack(depth)
         for p in range(task * per_task, min(n, (task + 1) * per_task)):
             v = path_pixel(
-                bvh, sc, cam, width, height, row0 * width + p, 0, spp, spp, seed, eps,
-                caustics, True, None, stack,
+                bvh, sc, cam, width, height, row0 * width + p, 0, spp, spp, seed, sequence,
+                first, eps, caustics, True, None, stack,
             )  # fmt: skip
             image[p, 0], image[p, 1], image[p, 2] = v[0] / spp, v[1] / spp, v[2] / spp
             albedo[p, 0], albedo[p, 1], albedo[p, 2] = v[3] / spp, v[4] / spp, v[5] / spp
@@ -311,17 +346,21 @@ def trace_pixels(
     seed: int,
     rows: tuple[int, int],
     caustics: bool = True,
+    sequence: tuple[int, int] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
     """Path tracing of whole pixels, image rows rows[0]..rows[1]-1: (rows, W, 3) float32 mean
     radiance, mean denoiser albedo and normal, visible points found and non-finite samples
-    dropped. The same samples (random streams) as `trace_visible_points` then `shade`, in one
-    pass that keeps no per-sample arrays; it equals them within float rounding."""
+    dropped. The same samples (random streams, and `sequence`) as `trace_visible_points` then
+    `shade`, in one pass that keeps no per-sample arrays; it equals them within float
+    rounding. With `sequence` (seed, first), sample s of a pixel is point first + s of the
+    pixel's stratified sequence in its position and first vertices (`stratified2`)."""
     row0, row1 = rows
     shape = (row1 - row0, camera.width, 3)
     image, albedo, normal = (np.empty((shape[0] * shape[1], 3)) for _ in range(3))
+    qseed, first = (-1, 0) if sequence is None else sequence
     hits, bad = pixels_kernel(
         bvh.arrays, bvh.depth, scene.kernel_arrays(), camera.basis(), camera.width,
-        camera.height, row0, row1, spp, seed, spawn_offset(scene), caustics,
+        camera.height, row0, row1, spp, seed, qseed, first, spawn_offset(scene), caustics,
         image, albedo, normal,
     )  # fmt: skip
     out = tuple(a.astype(np.float32).reshape(shape) for a in (image, albedo, normal))
@@ -340,8 +379,8 @@ def listed_kernel(
     for i in nb.prange(len(pixels)):
         stack = new_stack(depth)
         v = path_pixel(
-            bvh, sc, cam, width, height, pixels[i], first[i], counts[i], stride, seed, eps,
-            False, emission, grid, stack,
+            bvh, sc, cam, width, height, pixels[i], first[i], counts[i], stride, seed, -1, 0,
+            eps, False, emission, grid, stack,
         )  # fmt: skip
         out[i, 0], out[i, 1], out[i, 2], sq[i], bad[i] = v[0], v[1], v[2], v[11], v[10]
     return bad.sum()

@@ -2,7 +2,9 @@
 
 A random number is a hash of (seed, stream, dimension): a stream is e.g. a pixel sample or a
 photon path, a dimension one decision along it. No generator state is shared between threads,
-so results do not depend on the thread count or on the order of work.
+so results do not depend on the thread count or on the order of work. A camera path's first
+decisions can instead be points of its pixel's stratified sequence (`stratified2`, indexed by
+the path's number within the pixel): as uniform, but spread evenly over the pixel's paths.
 """
 
 from __future__ import annotations
@@ -11,6 +13,9 @@ import math
 
 import numba as nb
 import numpy as np
+from llvmlite import ir
+from numba.core import cgutils, types
+from numba.extending import intrinsic
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
@@ -98,3 +103,94 @@ def sobol2(index, scramble_x, scramble_y):
         vx >>= 1
         vy ^= vy >> 1
     return np.float64(x) * (1.0 / 4294967296.0), np.float64(y) * (1.0 / 4294967296.0)
+
+
+_LOW32 = np.uint64(0xFFFFFFFF)
+# Laine & Karras's hash (as Burley 2020 gives it): applied to a bit-reversed fraction, each
+# bit flips by a hash of the bits above it in the fraction.
+_LK = (np.uint64(0x6C50B47C), np.uint64(0xB82F1E52), np.uint64(0xC7AFE638), np.uint64(0x8D22F6E6))
+
+
+@intrinsic
+def _reverse32(typingctx, x):
+    """The 32 low bits of uint64 x in reverse order (LLVM's bitreverse, a few instructions)."""
+
+    def codegen(context, builder, sig, args):
+        i32 = ir.IntType(32)
+        fn = cgutils.get_or_insert_function(
+            builder.module, ir.FunctionType(i32, [i32]), "llvm.bitreverse.i32"
+        )
+        low = builder.trunc(args[0], i32)
+        return builder.zext(builder.call(fn, [low]), ir.IntType(64))
+
+    return types.uint64(types.uint64), codegen
+
+
+@nb.njit(cache=True, inline="always")
+def _hash_reversed(x, seed):
+    """Laine & Karras's permutation of uint64 x (< 2^32) for uint64 seed, mod 2^32."""
+    x = (x + (seed & _LOW32)) & _LOW32
+    for c in _LK:
+        x ^= (x * c) & _LOW32
+    return x
+
+
+@nb.njit(cache=True, inline="always")
+def owen32(x, seed):
+    """A hash-based Owen scramble of the 32-bit fraction x (uint64) for uint64 seed (Burley
+    2020): bit b flips by a hash of the bits above it, so any aligned run of 2^m fractions
+    maps to another aligned run (a random nested permutation)."""
+    return _reverse32(_hash_reversed(_reverse32(x), seed))
+
+
+def _sobol_tables() -> np.ndarray:
+    """(4, 256) uint64: Sobol dimension 2's 32-bit fraction for each byte of an index, per
+    byte position (the fraction of an index is the XOR of its bytes' entries)."""
+    columns, v = [], 1 << 31
+    for _ in range(32):  # the generator matrix's columns: Pascal's triangle mod 2
+        columns.append(v)
+        v ^= v >> 1
+    tables = np.zeros((4, 256), np.uint64)
+    for k in range(4):
+        for b in range(256):
+            for bit in range(8):
+                if b >> bit & 1:
+                    tables[k, b] ^= columns[8 * k + bit]
+    return tables
+
+
+_SOBOL2 = _sobol_tables()
+_BYTE = np.uint64(0xFF)
+
+
+@nb.njit(cache=True, inline="always")
+def stratified2(index, seed, pair):
+    """Point `index` (0 ≤ index < 2^32) of the pixel sequence `seed` (uint64) in dimension
+    pair `pair`: (u, v) in [0, 1)². The first two Sobol dimensions, index shuffled and both
+    coordinates Owen-scrambled by hashes of (seed, pair) (Burley 2020), so each point is
+    uniform, pairs are independent of each other, and any 2^m consecutive points from a
+    multiple of 2^m stratify the square as a (0, m, 2)-net does: progressive stratification."""
+    h = mix64(seed + np.uint64(pair + 1) * _GOLDEN)
+    # the shuffle is an Owen scramble of the index's reversed bits; Sobol's first dimension
+    # is the index reversed, so its scramble needs no reversal of its own
+    r = _hash_reversed(_reverse32(np.uint64(index) & _LOW32), h)
+    i = _reverse32(r)
+    x = _reverse32(_hash_reversed(i, mix64(h)))
+    t = _SOBOL2
+    y = t[0, i & _BYTE] ^ t[1, (i >> np.uint64(8)) & _BYTE]
+    y ^= t[2, (i >> np.uint64(16)) & _BYTE] ^ t[3, i >> np.uint64(24)]
+    y = owen32(y, mix64(h ^ _M1))
+    return np.float64(x) * (1.0 / 4294967296.0), np.float64(y) * (1.0 / 4294967296.0)
+
+
+@nb.njit(cache=True, inline="always")
+def pixel_sequence(seed, pix):
+    """uint64 seed of pixel pix's stratified sequence (`stratified2`) for a sequence seed."""
+    return mix64(mix64(np.uint64(seed) * _GOLDEN + np.uint64(pix)) ^ _M2)
+
+
+def sequence_seed(seed: int, half: int = 0) -> int:
+    """The seed (≥ 0) of the pixels' stratified sequences of a render's seed, or of one of its
+    halves (`auto`: each half's passes extend one sequence): independent of the random
+    streams' seeds."""
+    return int(np.random.SeedSequence([seed, half, 0x5EC]).generate_state(1)[0])

@@ -29,7 +29,7 @@ from dpm.tracer.bsdf import (
     specular_survival,
 )
 from dpm.tracer.bvh import BVH
-from dpm.tracer.sampling import sobol2, uniform
+from dpm.tracer.sampling import pixel_sequence, sobol2, stratified2, uniform
 from dpm.tracer.surface import albedo_at, next_surface
 from dpm.tracer.traverse import hit_triangle, new_stack, ray_setup, spawn_offset
 
@@ -194,16 +194,21 @@ def camera_sample(bvh, sc, cam, width, height, x, y, sx, sy, stream, seed, eps, 
 # Compiled without Numba's reference counting, as `dpm.tracer.path.shade_one` (see there).
 @nb.njit(cache=True, _nrt=False, error_model="numpy")
 def visible_pixel(
-    bvh, sc, cam, width, height, pix, row, spp, seed, eps, stack,
+    bvh, sc, cam, width, height, pix, row, spp, seed, sequence, first, eps, stack,
     position, normal, albedo, throughput, emitted, hit, pixel, sample,
 ):  # fmt: skip
-    """Fill output rows row..row+spp-1 with the samples of pixel pix (row-major index)."""
+    """Fill output rows row..row+spp-1 with the samples of pixel pix (row-major index); with
+    sequence ≥ 0, sample s lies at point first + s of the pixel's stratified sequence."""
     y, x = pix // width, pix % width
+    pseq = pixel_sequence(max(sequence, 0), pix)
     for s in range(spp):
         i = row + s
         stream = pix * spp + s
         pixel[i], sample[i] = pix, stream
-        sx, sy = uniform(seed, stream, 0), uniform(seed, stream, 1)
+        if sequence >= 0:
+            sx, sy = stratified2(first + s, pseq, 0)
+        else:
+            sx, sy = uniform(seed, stream, 0), uniform(seed, stream, 1)
         v = camera_sample(bvh, sc, cam, width, height, x, y, sx, sy, stream, seed, eps, stack)
         hit[i] = v[0]
         position[i, 0], position[i, 1], position[i, 2] = v[1], v[2], v[3]
@@ -215,28 +220,39 @@ def visible_pixel(
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
 def visible_points_kernel(
-    bvh, depth, sc, cam, width, height, row0, row1, spp, seed, eps,
+    bvh, depth, sc, cam, width, height, row0, row1, spp, seed, sequence, first, eps,
     position, normal, albedo, throughput, emitted, hit, pixel, sample,
 ):  # fmt: skip
     """Fill the output arrays (one row per sample of image rows row0..row1-1)."""
     for p in nb.prange((row1 - row0) * width):
         visible_pixel(
-            bvh, sc, cam, width, height, row0 * width + p, p * spp, spp, seed, eps,
-            new_stack(depth), position, normal, albedo, throughput, emitted, hit, pixel, sample,
+            bvh, sc, cam, width, height, row0 * width + p, p * spp, spp, seed, sequence, first,
+            eps, new_stack(depth), position, normal, albedo, throughput, emitted, hit, pixel,
+            sample,
         )  # fmt: skip
 
 
 def trace_visible_points(
-    scene: Scene, bvh: BVH, camera: Camera, spp: int, seed: int, rows: tuple[int, int]
+    scene: Scene,
+    bvh: BVH,
+    camera: Camera,
+    spp: int,
+    seed: int,
+    rows: tuple[int, int],
+    sequence: tuple[int, int] | None = None,
 ) -> VisiblePoints:
-    """Visible points of spp samples per pixel for image rows rows[0]..rows[1]-1."""
+    """Visible points of spp samples per pixel for image rows rows[0]..rows[1]-1. With
+    `sequence` (seed, first), sample s of a pixel lies at point first + s of the pixel's
+    stratified sequence (`stratified2`; pass the same to `shade`), else at random."""
     row0, row1 = rows
+    qseed, first = (-1, 0) if sequence is None else sequence
     n = (row1 - row0) * camera.width * spp
     vec = [np.zeros((n, 3), np.float32) for _ in range(5)]
     hit, pixel, sample = np.zeros(n, np.bool_), np.zeros(n, np.int32), np.zeros(n, np.int64)
     visible_points_kernel(
         bvh.arrays, bvh.depth, scene.kernel_arrays(), camera.basis(), camera.width,
-        camera.height, row0, row1, spp, seed, spawn_offset(scene), *vec, hit, pixel, sample,
+        camera.height, row0, row1, spp, seed, qseed, first, spawn_offset(scene), *vec, hit,
+        pixel, sample,
     )  # fmt: skip
     footprint = np.where(hit, camera.footprint(vec[0]), 0.0).astype(np.float32)
     return VisiblePoints(*vec, hit, pixel, sample, footprint)
