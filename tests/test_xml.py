@@ -133,9 +133,12 @@ def test_an_xml_scene_renders_as_its_obj_twin(tmp_path: Path, mesh: str) -> None
         )
     assert (from_xml.camera.width, from_xml.camera.height) == (24, 20)
     options = dict(method="pt", spp=2, seed=1, progress=False)
-    image = dpm.render(from_xml, **options)
-    np.testing.assert_allclose(image, dpm.render(from_obj, **options), rtol=1e-4, atol=1e-5)
-    assert image.mean() > 0
+    image, twin = dpm.render(from_xml, **options), dpm.render(from_obj, **options)
+    # The two loaders' float32 vertices agree to about 1e-7, not bit for bit: a shadow ray
+    # grazing an edge may go either way, so a pixel of the 480 may differ by a path's light.
+    differ = ~np.isclose(image, twin, rtol=1e-4, atol=1e-5).all(axis=-1)
+    assert differ.sum() <= 2, np.argwhere(differ)
+    assert image.mean() > 0 and abs(image.mean() - twin.mean()) < 0.01 * image.mean()
 
 
 @pytest.mark.parametrize(
