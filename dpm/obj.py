@@ -8,6 +8,7 @@ offending line of a malformed file.
 from __future__ import annotations
 
 import math
+import re
 import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -72,9 +73,9 @@ def _read_lines(path: Path) -> list[str]:
         raise InputError(f"{path}: cannot read: {exc.strerror}") from None
 
 
-def _statements(path: Path) -> Iterator[tuple[int, list[str]]]:
+def _statements(lines: list[str]) -> Iterator[tuple[int, list[str]]]:
     """(line number, words) of each non-empty line, comments removed."""
-    for lineno, raw in enumerate(_read_lines(path), start=1):
+    for lineno, raw in enumerate(lines, start=1):
         words = raw.split("#", 1)[0].split()
         if words:
             yield lineno, words
@@ -102,6 +103,116 @@ def _rgb(path: Path, lineno: int, words: list[str]) -> tuple[float, float, float
 
 def read_obj(path: Path) -> ObjMesh:
     """Parse an OBJ file into vertices (V,3), triangles (T,3) and per-triangle material names."""
+    lines = _read_lines(path)
+    plain = _read_plain(path, lines)
+    return plain if plain is not None else _read_any(path, lines)
+
+
+# A face line's vertices, each `v`, `v/t`, `v/t/n` or `v//n` (one form per file), one space
+# apart: the forms `_read_plain` parses; negative (relative) indices go to `_read_any`.
+_FACE_FORMS = {
+    (1, False): re.compile(r"[0-9]+(?: [0-9]+)*"),
+    (2, False): re.compile(r"[0-9]+/[0-9]+(?: [0-9]+/[0-9]+)*"),
+    (3, False): re.compile(r"[0-9]+/[0-9]+/[0-9]+(?: [0-9]+/[0-9]+/[0-9]+)*"),
+    (3, True): re.compile(r"[0-9]+//[0-9]+(?: [0-9]+//[0-9]+)*"),
+}
+
+
+def _read_plain(path: Path, lines: list[str]) -> ObjMesh | None:
+    """The OBJ files exporters write (single spaces, `v x y z`, one face form), parsed with
+    numpy's string functions in about a third of `_read_any`'s time (0.05 against 0.15 s for
+    40k lines); None where any line is other, for `_read_any` to parse or name the line."""
+    text = np.array(lines, dtype=np.dtypes.StringDType())
+    key, _, rest = np.strings.partition(text, np.array(" ", dtype=text.dtype))
+    known = np.isin(key, ["v", "vt", "f", "usemtl", "mtllib", *_OBJ_IGNORED])
+    known |= np.strings.startswith(key, "#")
+    empty = np.flatnonzero(key == "")
+    known[empty] = np.strings.strip(rest[empty]) == ""  # " v 1 2 3" is not a blank line
+    if not known.all():
+        return None
+    line_v, line_vt, line_f = (np.flatnonzero(key == k) for k in ("v", "vt", "f"))
+    vertices = _plain_numbers(rest[line_v], (3,))
+    texcoords = _plain_numbers(rest[line_vt], (2, 3))
+    if vertices is None or texcoords is None or len(line_f) == 0:
+        return None
+    face = rest[line_f]
+    corners = np.strings.count(face, " ") + 1  # (F,) vertices per face line
+    joined = " ".join(face.tolist())
+    fields = joined.count("/") // int(corners.sum()) + 1
+    form = _FACE_FORMS.get((fields, "//" in joined))
+    if form is None or corners.min() < 3 or form.fullmatch(joined) is None:
+        return None
+    numbers = np.fromstring(joined.replace("/", " "), dtype=np.int64, sep=" ")
+    numbers = numbers.reshape(-1, fields - ("//" in joined))
+    # Indices count from 1 among the statements before the face (a later vertex is an error).
+    index = numbers[:, 0] - 1
+    if index.min() < 0 or (index >= np.repeat(np.searchsorted(line_v, line_f), corners)).any():
+        return None
+    uv = np.full(len(index), -1, np.int64)
+    if fields > 1 and "//" not in joined:  # no such vt: that face is untextured, as in _read_any
+        uv = numbers[:, 1] - 1
+        defined = np.repeat(np.searchsorted(line_vt, line_f), corners)
+        first = np.cumsum(corners) - corners
+        whole = np.logical_and.reduceat((uv >= 0) & (uv < defined), first)
+        uv = np.where(np.repeat(whole, corners), uv, -1)
+    materials = _plain_materials(path, lines, key)
+    if materials is None:
+        return None
+    names, current, mtllibs = materials
+    # Fan triangulation (0, j, j + 1) of each face line, keeping the winding.
+    triangles = corners - 2
+    line = np.repeat(np.arange(len(line_f)), triangles)
+    j = np.arange(len(line)) - np.repeat(np.cumsum(triangles) - triangles, triangles) + 1
+    base = (np.cumsum(corners) - corners)[line]
+    corner = np.stack([base, base + j, base + j + 1], axis=1)
+    return ObjMesh(
+        vertices=vertices,
+        faces=index[corner],
+        face_material=current[np.searchsorted(np.flatnonzero(key == "usemtl"), line_f)][line],
+        material_names=names,
+        mtllibs=mtllibs,
+        texcoords=texcoords,
+        face_texcoords=uv[corner],
+    )
+
+
+def _plain_numbers(rest: np.ndarray, counts: tuple[int, ...]) -> np.ndarray | None:
+    """(N, counts[0]) float64 of N statements' numbers, each statement `counts` numbers one
+    space apart (one count for all; beyond the first counts[0], dropped); None otherwise."""
+    if len(rest) == 0:
+        return np.zeros((0, counts[0]))
+    spaces = np.strings.count(rest, " ")
+    joined = " ".join(rest.tolist())
+    if spaces.min() != spaces.max() or spaces[0] + 1 not in counts or "  " in joined:
+        return None
+    try:  # a word that is not a number raises; tabs or a trailing space change the count
+        values = np.fromstring(joined, sep=" ")
+    except ValueError:
+        return None
+    if len(values) != len(rest) * (spaces[0] + 1) or not np.isfinite(values).all():
+        return None
+    return values.reshape(len(rest), -1)[:, : counts[0]].copy()
+
+
+def _plain_materials(
+    path: Path, lines: list[str], key: np.ndarray
+) -> tuple[list[str], np.ndarray, list[Path]] | None:
+    """The material names in order of first use; (U + 1,) int32 the material from each usemtl
+    on (-1 before the first); the mtllib paths. None where a usemtl or mtllib names nothing."""
+    used, libraries = (
+        [" ".join(lines[i].split("#", 1)[0].split()[1:]) for i in np.flatnonzero(key == k)]
+        for k in ("usemtl", "mtllib")
+    )
+    if "" in used or "" in libraries:
+        return None
+    names = list(dict.fromkeys(used))
+    current = [-1] + [names.index(name) for name in used]
+    return names, np.asarray(current, np.int32), [path.parent / lib for lib in libraries]
+
+
+def _read_any(path: Path, lines: list[str]) -> ObjMesh:
+    """Any OBJ file dpm reads, statement by statement: the reference for `_read_plain`, and
+    the one that names the line of an error."""
     vertices: list[list[float]] = []
     texcoords: list[list[float]] = []
     faces: list[tuple[int, int, int]] = []
@@ -111,7 +222,7 @@ def read_obj(path: Path) -> ObjMesh:
     name_index: dict[str, int] = {}
     mtllibs: list[Path] = []
     current = -1
-    for lineno, words in _statements(path):
+    for lineno, words in _statements(lines):
         key = words[0]
         if key == "v":
             # A fourth (w) or extra colour values are allowed by common exporters; keep x, y, z.
@@ -192,7 +303,7 @@ def read_mtl(path: Path) -> dict[str, MtlEntry]:
     entries: dict[str, MtlEntry] = {}
     entry: MtlEntry | None = None
     ignored: dict[str, int] = {}  # key -> the first line it is on
-    for lineno, words in _statements(path):
+    for lineno, words in _statements(_read_lines(path)):
         key = words[0]
         if key == "newmtl":
             if len(words) < 2:
