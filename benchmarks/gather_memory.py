@@ -74,8 +74,8 @@ def main() -> None:
         "",
         "Made by `python benchmarks/gather_memory.py`. *data*: peak resident memory after",
         "building the inputs (photon map ≈ 0.5 GB); *peak*: after the estimate. Points are",
-        f"answered {gather.POINTS_PER_CHUNK:,} at a time (K nearest) and photons "
-        f"{gather.PHOTONS_PER_CHUNK:,} at a time (PPM).",
+        f"answered {gather.POINTS_PER_CHUNK:,} at a time (K nearest); PPM's pairs come from",
+        "hashed grids over the points, every photon at once (`dpm.tracer.point_grid`).",
         "",
         "| estimator | seconds | data MiB | peak MiB | added by gathering MiB |",
         "|---|---|---|---|---|",

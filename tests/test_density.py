@@ -165,6 +165,8 @@ def test_photons_from_the_other_side_are_not_counted() -> None:
 
 
 def test_gathering_matches_brute_force_and_chunking(monkeypatch) -> None:
+    """K nearest in chunks of points, and pairs within radii from fresh and kept point grids
+    (radii shrinking, growing, some zero), all as brute force finds them."""
     rng = np.random.default_rng(4)
     photons = plane_photons(3000, 5)
     photons = PhotonMap(
@@ -177,7 +179,6 @@ def test_gathering_matches_brute_force_and_chunking(monkeypatch) -> None:
     d = np.linalg.norm(points[:, None].astype(np.float64) - photons.position[None], axis=2)
     agree = photons.normal[:, 2] > 0
     monkeypatch.setattr(gather, "POINTS_PER_CHUNK", 37)
-    monkeypatch.setattr(gather, "PHOTONS_PER_CHUNK", 101)
     chunks = [nb for _, nb in gather.PhotonIndex(photons).nearest(points, normal, 10)]
     rows, valid = np.vstack([nb.index for nb in chunks]), np.vstack([nb.valid for nb in chunks])
     np.testing.assert_array_equal(rows, np.argsort(d, axis=1, kind="stable")[:, :10])
@@ -186,11 +187,21 @@ def test_gathering_matches_brute_force_and_chunking(monkeypatch) -> None:
     # a few points far wider than the rest (searched apart), one of those wider still
     spread = radius.copy()
     spread[[3, 50, 120]] = (0.9, 2.0, 40.0)
-    for r in (radius, spread):
-        pairs = gather.PointIndex(points, normal).within(photons, r)
-        found = set(zip(pairs.point.tolist(), pairs.photon.tolist(), strict=True))
-        expected = set(zip(*np.nonzero((d < r[:, None]) & agree[None]), strict=True))
-        assert found == expected and len(pairs.point) == len(found)
+    kept = gather.PointIndex(points, normal)  # one index, radii shrinking then growing
+    for r in (
+        radius,
+        spread,
+        spread * 0.9,
+        spread * 0.3,
+        spread * 2.0,
+        np.where(d[:, 0] < 0.5, spread, 0),
+    ):
+        for index in (gather.PointIndex(points, normal), kept):
+            pairs = index.within(photons, r)
+            found = set(zip(pairs.point.tolist(), pairs.photon.tolist(), strict=True))
+            expected = set(zip(*np.nonzero((d < r[:, None]) & agree[None]), strict=True))
+            assert found == expected and len(pairs.point) == len(found)
+            np.testing.assert_allclose(pairs.distance, d[pairs.point, pairs.photon], rtol=1e-12)
 
 
 def test_photon_index_answers_from_its_own_map_and_times_gathering() -> None:

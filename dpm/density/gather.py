@@ -1,10 +1,12 @@
-"""Gathering photons around visible points with scipy's cKDTree.
+"""Gathering photons around visible points: scipy's cKDTree for the K nearest, hashed grids
+for the photons within a radius.
 
-Two directions, both chunked so that peak memory stays bounded:
+Two directions:
 - `PhotonIndex.nearest`: a tree over the photons, built once per photon map, answers the K
-  nearest photons of each point (PM, DPM);
-- `PointIndex.within`: a tree over the points answers, for each photon of a pass, the points whose
-  radius reaches it (the progressive methods, whose points stay put while passes stream by).
+  nearest photons of each point (PM, DPM), in chunks of points so that memory stays bounded;
+- `PointIndex.within`: hashed grids over the points answer, for each photon of a pass, the
+  points whose radius reaches it (the progressive methods, whose points stay put while passes
+  stream by).
 A photon counts only where its surface normal agrees with the point's (within 60°): photons on
 the far side of a thin wall or on a perpendicular wall belong to another surface. Building
 and querying count as the "gather" stage of the `Stopwatch` passed in.
@@ -21,13 +23,16 @@ import numpy as np
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap
 from dpm.tracer.photon_grid import NORMAL_COS
+from dpm.tracer.point_grid import PointGrid, grid_pairs, point_grid
 
 if TYPE_CHECKING:
     from scipy.spatial import cKDTree
 
 POINTS_PER_CHUNK = 1 << 14  # K-nearest queries answered at once
-PHOTONS_PER_CHUNK = 1 << 16  # photons of a pass whose points are sought at once
 SPREAD = 4.0  # points wider than this times the 90th percentile radius are searched apart
+REBUILD = (
+    0.5  # a point grid is rebuilt when the 90th percentile radius shrinks below this × its own
+)
 GATHER = "gather"  # the stopwatch stage of tree building and queries
 
 
@@ -120,12 +125,14 @@ def photon_index(photons: Photons, watch: Watch = None) -> PhotonIndex:
 
 
 class PointIndex:
-    """A cKDTree over fixed points (N, 3) with their normals, queried by passes of photons."""
+    """Fixed points (N, 3) with their normals, queried by passes of photons through hashed
+    grids (`dpm.tracer.point_grid`), kept from pass to pass while the radii shrink."""
 
     def __init__(self, position: np.ndarray, normal: np.ndarray) -> None:
         self.position = np.asarray(position, np.float64)
         self.normal = np.asarray(normal, np.float32)
-        self.tree = kd_tree(self.position)
+        self.levels: list[tuple[np.ndarray, PointGrid]] = []  # (points, their grid)
+        self.typical = 0.0  # the 90th percentile radius the grids were built for
 
     def within(
         self, photons: PhotonMap, radius: np.ndarray | float, watch: Stopwatch | None = None
@@ -137,45 +144,46 @@ class PointIndex:
 
     def _within(self, photons: PhotonMap, radius: np.ndarray | float) -> Pairs:
         radius = np.broadcast_to(np.asarray(radius, np.float64), (len(self.position),))
-        parts = self._pairs(self.tree, np.arange(len(self.position)), radius, photons)
+        live = np.flatnonzero(radius > 0)
+        parts = []
+        if len(live) and len(photons):
+            if not self._holds(radius, live):
+                self.typical = float(np.quantile(radius[live], 0.9))
+                self.levels = self._grids(live, radius)
+            for ids, grid in self.levels:
+                point, photon, dist = grid_pairs(
+                    grid, radius[ids], photons.position, photons.normal
+                )
+                parts.append((ids[point], photon, dist))
         if not parts:
             empty = np.zeros(0, np.int64)
             parts.append((empty, empty, np.zeros(0)))
         point, photon, dist = (np.concatenate(c) for c in zip(*parts, strict=True))
         return Pairs(point, photon, dist)
 
-    def _pairs(
-        self, tree: cKDTree, ids: np.ndarray, radius: np.ndarray, photons: PhotonMap
-    ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        """(points, photons, distances) of the pairs within radius of the points `ids` that
-        `tree` holds. The pair search reaches as far as its widest point, so a few points
-        far wider than the rest (seen 500 units away past a mirror) would pair every photon
-        with every point: points wider than SPREAD times the 90th percentile of the radii
-        are searched apart, in a tree of their own (and so on, if they spread too)."""
+    def _holds(self, radius: np.ndarray, live: np.ndarray) -> bool:
+        """Whether the grids serve these radii: each within the one its point was entered
+        with, and the typical one not below REBUILD of theirs (cells far wider than the
+        balls would make each photon read too many points)."""
+        if not self.levels:
+            return False
+        grown = any((radius[ids] > grid.radius).any() for ids, grid in self.levels)
+        entered = sum(len(ids) for ids, _ in self.levels)
+        return (
+            not grown
+            and entered == len(live)
+            and (np.quantile(radius[live], 0.9) >= REBUILD * self.typical)
+        )
+
+    def _grids(self, ids: np.ndarray, radius: np.ndarray) -> list[tuple[np.ndarray, PointGrid]]:
+        """Grids over the points `ids`, in cells twice their 90th percentile radius. A point
+        is entered in every cell its ball meets, so a few points far wider than the rest
+        (seen 500 units away past a mirror) would fill every cell: points wider than SPREAD
+        times the 90th percentile are entered apart, in a grid of their own (and so on, if
+        they spread too)."""
         own = radius[ids]
-        reach = float(own.max(initial=0.0))
-        typical = float(np.quantile(own, 0.9)) if len(own) else 0.0
-        wide = own > SPREAD * typical if typical > 0 else np.zeros(len(own), bool)
-        if wide.any():
-            reach = SPREAD * typical
-        parts = []
-        for start in range(0, len(photons), PHOTONS_PER_CHUNK):
-            position = photons.position[start : start + PHOTONS_PER_CHUNK].astype(np.float64)
-            # Most photons land where no point's radius reaches (the discs cover a few per
-            # cent of the surfaces): a parallel nearest-point query drops them before the
-            # single-threaded pair search.
-            near, _ = tree.query(position, k=1, distance_upper_bound=reach, workers=-1)
-            reached = np.flatnonzero(near <= reach)
-            if len(reached) == 0:
-                continue
-            other = kd_tree(position[reached])
-            m = tree.sparse_distance_matrix(other, reach, output_type="ndarray")
-            point, photon, dist = ids[m["i"]], reached[m["j"]] + start, m["v"]
-            keep = (dist < radius[point]) & _agree(self.normal[point], photons.normal[photon])
-            if wide.any():
-                keep &= radius[point] <= reach  # the wide points' pairs come from their tree
-            parts.append((point[keep], photon[keep], dist[keep]))
-        if wide.any():
-            apart = ids[wide]
-            parts += self._pairs(kd_tree(self.position[apart]), apart, radius, photons)
-        return parts
+        typical = float(np.quantile(own, 0.9))
+        wide = own > SPREAD * typical
+        narrow = ids[~wide]
+        grid = point_grid(self.position[narrow], self.normal[narrow], own[~wide], 2 * typical)
+        return [(narrow, grid)] + (self._grids(ids[wide], radius) if wide.any() else [])

@@ -32,21 +32,56 @@ class PhotonGrid(NamedTuple):
 
 
 @nb.njit(cache=True, inline="always")
-def _bucket(ix, iy, iz, mask):
+def bucket(ix, iy, iz, mask):
     """Hash bucket of integer cell (ix, iy, iz)."""
     return ((ix * _PRIMES[0]) ^ (iy * _PRIMES[1]) ^ (iz * _PRIMES[2])) & mask
+
+
+@nb.njit(cache=True, inline="always")
+def ball_cells(px, py, pz, r, cell):
+    """The block of cells (cubes of side `cell`) that the ball of radius r about p meets: its
+    first integer cell (x0, y0, z0) and its cells along x, y and z."""
+    x0, y0, z0 = (
+        math.floor((px - r) / cell),
+        math.floor((py - r) / cell),
+        math.floor((pz - r) / cell),
+    )
+    cx = math.floor((px + r) / cell) - x0 + 1
+    cy = math.floor((py + r) / cell) - y0 + 1
+    cz = math.floor((pz + r) / cell) - z0 + 1
+    return x0, y0, z0, cx, cy, cz
+
+
+@nb.njit(cache=True, inline="always")
+def ball_bucket(c, x0, y0, z0, cy, cz, mask):
+    """The bucket of the block's c-th cell (z fastest), or −1 where an earlier cell of the
+    block hashed to the same bucket (each bucket is read once)."""
+    h = bucket(x0 + c // (cy * cz), y0 + c // cz % cy, z0 + c % cz, mask)
+    for e in range(c):
+        if bucket(x0 + e // (cy * cz), y0 + e // cz % cy, z0 + e % cz, mask) == h:
+            return -1
+    return h
+
+
+def bucket_count(n: int) -> int:
+    """Buckets for n entries: the least power of two ≥ 2n (at least 2)."""
+    return 1 << max(1, (2 * n - 1).bit_length())
+
+
+def sort_into_buckets(key: np.ndarray, buckets: int) -> tuple[np.ndarray, np.ndarray]:
+    """(start, order) of entries with bucket keys (E,) int64: (buckets + 1,) int64 first row
+    of each bucket, and (E,) int64 the entry of each row (stable: in entry order within)."""
+    order = np.argsort(key, kind="stable")
+    return np.searchsorted(key[order], np.arange(buckets + 1)).astype(np.int64), order
 
 
 def photon_grid(photons: PhotonMap, radius: float) -> PhotonGrid:
     """The grid of a photon map for queries of radius r > 0 (scene units)."""
     if not (math.isfinite(radius) and radius > 0):
         raise ValueError(f"the grid's radius must be positive and finite (got {radius})")
-    n = len(photons)
-    buckets = 1 << max(1, (2 * n - 1).bit_length())
+    buckets = bucket_count(len(photons))
     cells = np.floor(photons.position.astype(np.float64) / (2.0 * radius)).astype(np.int64)
-    key = _bucket(cells[:, 0], cells[:, 1], cells[:, 2], buckets - 1)
-    order = np.argsort(key, kind="stable")
-    start = np.searchsorted(key[order], np.arange(buckets + 1)).astype(np.int64)
+    start, order = sort_into_buckets(bucket(*cells.T, buckets - 1), buckets)
     return PhotonGrid(
         start,
         photons.position[order].astype(np.float64),
@@ -62,19 +97,12 @@ def grid_irradiance(grid, px, py, pz, nx, ny, nz):
     the unit normal n: the caustic irradiance (W/m²) of a density estimate with a disc of
     radius r."""
     r = grid.radius
-    cell = 2.0 * r
     mask = len(grid.start) - 2
-    x0, x1 = math.floor((px - r) / cell), math.floor((px + r) / cell)
-    y0, y1 = math.floor((py - r) / cell), math.floor((py + r) / cell)
-    z0, z1 = math.floor((pz - r) / cell), math.floor((pz + r) / cell)
-    cy, cz = y1 - y0 + 1, z1 - z0 + 1  # cells the ball meets along y and z
+    x0, y0, z0, cx, cy, cz = ball_cells(px, py, pz, r, 2.0 * r)  # 1 or 2 cells each way
     er = eg = eb = 0.0
-    for c in range((x1 - x0 + 1) * cy * cz):
-        h = _bucket(x0 + c // (cy * cz), y0 + c // cz % cy, z0 + c % cz, mask)
-        seen = False  # an earlier cell of this query hashed to the same bucket
-        for e in range(c):
-            seen |= _bucket(x0 + e // (cy * cz), y0 + e // cz % cy, z0 + e % cz, mask) == h
-        if seen:
+    for c in range(cx * cy * cz):
+        h = ball_bucket(c, x0, y0, z0, cy, cz, mask)
+        if h < 0:
             continue
         for k in range(grid.start[h], grid.start[h + 1]):
             dx = grid.position[k, 0] - px
