@@ -195,6 +195,7 @@ def test_gathering_matches_brute_force_and_chunking(monkeypatch) -> None:
         spread * 0.3,
         spread * 2.0,
         np.where(d[:, 0] < 0.5, spread, 0),
+        np.where(d[:, 0] >= 0.5, spread, 0),  # other points live
     ):
         for index in (gather.PointIndex(points, normal), kept):
             pairs = index.within(photons, r)

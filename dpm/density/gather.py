@@ -167,12 +167,13 @@ class PointIndex:
         balls would make each photon read too many points)."""
         if not self.levels:
             return False
-        grown = any((radius[ids] > grid.radius).any() for ids, grid in self.levels)
-        entered = sum(len(ids) for ids, _ in self.levels)
-        return (
-            not grown
-            and entered == len(live)
-            and (np.quantile(radius[live], 0.9) >= REBUILD * self.typical)
+        entered = np.zeros(len(radius), bool)
+        for ids, grid in self.levels:
+            if (radius[ids] > grid.radius).any():
+                return False
+            entered[ids] = True
+        return bool(entered[live].all()) and (
+            np.quantile(radius[live], 0.9) >= REBUILD * self.typical
         )
 
     def _grids(self, ids: np.ndarray, radius: np.ndarray) -> list[tuple[np.ndarray, PointGrid]]:

@@ -206,7 +206,6 @@ def warm_first_kernels(scene: Scene, bvh: BVH, camera: Camera) -> None:
     shade(scene, bvh, points, 0, False, photon_grid(photons, 1.0), sequence)
     pixels = np.arange(4, dtype=np.int64)
     trace_emitted(scene, bvh, tiny, pixels, 1, 0, 0)
-    trace_emitted(scene, bvh, tiny, pixels, np.ones(4, np.int64), 0, np.zeros(4, np.int64))
     states = (PPMState.start(4, 1.0, ALPHA), PPMState.start(4, 1.0, ALPHA))
     sppm_gather(states, points, photons, Stopwatch())
 
