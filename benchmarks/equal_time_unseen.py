@@ -22,9 +22,13 @@ diffuse controls included), at the resolution W x H of each scene's Mitsuba 3 re
 - Per budget dpm runs first, then Mitsuba at once (the load of the machine falls on both in
   turn, budget after budget); the load average (`os.getloadavg`) is recorded at the start and
   end of each scene. Both sides run once untimed first per scene (dpm at the largest budget,
-  so Numba's cache is warm; Mitsuba one short run, for Dr.Jit's kernel cache and the reserve).
+  so Numba's cache is warm; Mitsuba one short run per sampler, for Dr.Jit's kernel cache and
+  the reserve).
+- Mitsuba runs with each sampler of --samplers (default: `independent`, its default, and
+  `multijitter`, its best per sample on the controls), each time-boxed to dpm's seconds, in
+  turn (the first sampler alternating with the budget).
 - Scored by RMSE (`dpm.metrics.rmse`, all pixels and channels) against the reference's mean;
-  Mitsuba's score is the better of plain and OIDN; ratio = dpm / Mitsuba's best.
+  Mitsuba's score is the best of plain and OIDN over its samplers; ratio = dpm / that.
 
 Writes a JSON record per scene to results/equal_time_unseen/NAME.json (a rerun of some scenes
 rebuilds the table from all records), results/equal_time_unseen.md, and per scene
@@ -68,13 +72,16 @@ SEED_STRIDE = 100_000  # Mitsuba's seeds: SEED_STRIDE * (budget index + 1) + bat
 # references' are 1,000,000 + x and 2,000,000 + x (x < 8192), so none is shared
 PICTURE_BUDGET = 4.0  # the side-by-side image's budget (the nearest one run)
 
+SAMPLERS = ("independent", "multijitter")  # Mitsuba's samplers run at each budget
+
 # argv: desc.json, spp per batch, variant, out.npz, first seed, launch (time.monotonic() of the
-# parent just before it started this process), budget seconds, reserve seconds
+# parent just before it started this process), budget seconds, reserve seconds, sampler
 MITSUBA_TIMEBOX = (
     MITSUBA_PRELUDE
     + r"""
 import time
 launch, budget, reserve = (float(a) for a in sys.argv[6:9])
+desc["sensor"]["sampler"]["type"] = sys.argv[9]
 scene = mi.load_dict(desc)
 loaded = time.monotonic()
 total, batches, dropped = None, [], 0
@@ -132,16 +139,22 @@ def scoring_reference(name: str, camera_width: int) -> tuple[int, int, Path, Pat
 
 
 def mitsuba_timebox(
-    desc: Path, variant: str, budget: float, reserve: float, seed: int, batch_spp: int = BATCH_SPP
+    desc: Path,
+    variant: str,
+    budget: float,
+    reserve: float,
+    seed: int,
+    batch_spp: int = BATCH_SPP,
+    sampler: str = "independent",
 ) -> tuple[np.ndarray, np.ndarray, float, dict]:
     """(plain mean, OIDN-denoised, whole-process seconds, the child's record) of a Mitsuba
-    child time-boxed to `budget` seconds from its launch, keeping `reserve` seconds for the
-    end. The record's "tail" is the seconds from the end of rendering to the exit."""
+    child with `sampler` time-boxed to `budget` seconds from its launch, keeping `reserve`
+    seconds for the end. The record's "tail" is the seconds from rendering's end to the exit."""
     out = desc.with_name("timebox.npz")
     launch = time.monotonic()
     subprocess.run(
         [sys.executable, str(desc.with_name("child.py")), str(desc), str(batch_spp), variant,
-         str(out), str(seed), repr(launch), repr(budget), repr(reserve)],
+         str(out), str(seed), repr(launch), repr(budget), repr(reserve), sampler],
         check=True, stdout=subprocess.DEVNULL,
     )  # fmt: skip
     seconds = time.monotonic() - launch
@@ -157,8 +170,16 @@ def load() -> list[float]:
     return [round(x, 2) for x in os.getloadavg()]
 
 
-def run_scene(name: str, times: list[float], variant: str, batch_spp: int = BATCH_SPP) -> dict:
-    """Both renderers at each budget on scene `name`; errors, seconds, spp and load."""
+def run_scene(
+    name: str,
+    times: list[float],
+    variant: str,
+    batch_spp: int = BATCH_SPP,
+    samplers: tuple[str, ...] = SAMPLERS,
+) -> dict:
+    """Both renderers at each budget on scene `name` (Mitsuba with each sampler); errors,
+    seconds, spp and load. A row's flat Mitsuba fields are its first sampler's; the others'
+    are under "mitsuba_<sampler>"."""
     path = {p.stem: p for p in unseen_scenes()}[name]
     scene = load_scene(path)
     width, height, ref_path, own_path = scoring_reference(name, scene.camera.width)
@@ -173,21 +194,27 @@ def run_scene(name: str, times: list[float], variant: str, batch_spp: int = BATC
         folder = Path(tmp)
         desc = mitsuba_setup(scene, camera, folder, MITSUBA_TIMEBOX)
         dpm_run(path, width, height, max(times), 0, folder)  # warm Numba's cache, untimed
-        *_, warm = mitsuba_timebox(desc, variant, WARM_BUDGET, 0.0, 0, batch_spp)
-        reserve = warm["tail"]
+        reserve = {}  # each sampler's own warm-up: its kernels differ (Dr.Jit compiles them)
+        for k in samplers:
+            *_, warm = mitsuba_timebox(desc, variant, WARM_BUDGET, 0.0, 0, batch_spp, k)
+            reserve[k] = warm["tail"]
         for i, budget in enumerate(times):
             ours, ours_s, stats = dpm_run(path, width, height, budget, i + 1, folder)
-            plain, oidn, theirs_s, info = mitsuba_timebox(
-                desc, variant, ours_s, reserve, SEED_STRIDE * (i + 1), batch_spp
-            )
-            plain_rmse, oidn_rmse = rmse(plain, ref), rmse(oidn, ref)
             ours_rmse = rmse(ours, ref)
+            runs = {}  # sampler -> (plain, OIDN, seconds, the child's record)
+            for k in samplers[i % len(samplers) :] + samplers[: i % len(samplers)]:
+                runs[k] = mitsuba_timebox(
+                    desc, variant, ours_s, reserve[k], SEED_STRIDE * (i + 1), batch_spp, k
+                )
+                reserve[k] = runs[k][3]["tail"]
+            plain, oidn, theirs_s, info = runs[samplers[0]]
+            plain_rmse, oidn_rmse = rmse(plain, ref), rmse(oidn, ref)
             rows.append({
                 "budget": budget, "dpm_s": ours_s, "passes": stats["passes"],
                 "plan": stats.get("plan", {}).get("reason"), "dpm_rmse": ours_rmse,
                 "mitsuba_s": theirs_s, "mitsuba_spp": info["spp"],
                 "mitsuba_plain_rmse": plain_rmse, "mitsuba_oidn_rmse": oidn_rmse,
-                "ratio": ours_rmse / min(plain_rmse, oidn_rmse), "reserve_s": reserve,
+                "reserve_s": reserve[samplers[0]],
                 "mitsuba_loaded_s": info["loaded"], "mitsuba_rendered_s": info["rendered"],
                 "mitsuba_batch_s": float(np.median(info["batch_seconds"])),
                 "mitsuba_tail_s": info["tail"], "mitsuba_nonfinite": info["nonfinite_dropped"],
@@ -195,8 +222,18 @@ def run_scene(name: str, times: list[float], variant: str, batch_spp: int = BATC
             if own is not None:  # the same three errors against the scene's own reference
                 rows[-1].update(dpm_rmse_own=rmse(ours, own), mitsuba_plain_rmse_own=rmse(
                     plain, own), mitsuba_oidn_rmse_own=rmse(oidn, own))  # fmt: skip
-            images.append((ours, plain if plain_rmse <= oidn_rmse else oidn))
-            reserve = info["tail"]
+            for k in samplers[1:]:
+                p, o, sec, rec = runs[k]
+                rows[-1][f"mitsuba_{k}"] = {
+                    "s": sec, "spp": rec["spp"], "plain_rmse": rmse(p, ref),
+                    "oidn_rmse": rmse(o, ref), "tail_s": rec["tail"],
+                    **({} if own is None else {"plain_rmse_own": rmse(p, own),
+                                               "oidn_rmse_own": rmse(o, own)}),
+                }  # fmt: skip
+            rows[-1]["mitsuba_best_rmse"] = mitsuba_best(rows[-1])
+            rows[-1]["ratio"] = ours_rmse / rows[-1]["mitsuba_best_rmse"]
+            best = min(runs.values(), key=lambda run: min(rmse(run[0], ref), rmse(run[1], ref)))
+            images.append((ours, best[0] if rmse(best[0], ref) <= rmse(best[1], ref) else best[1]))
             shown = ("dpm_s", "passes", "dpm_rmse", "mitsuba_s", "mitsuba_spp",
                      "mitsuba_plain_rmse", "mitsuba_oidn_rmse", "ratio")  # fmt: skip
             print(f"{name} {budget:g} s:", {k: round(rows[-1][k], 4) for k in shown}, flush=True)
@@ -212,9 +249,20 @@ def run_scene(name: str, times: list[float], variant: str, batch_spp: int = BATC
         "reference_noise_rgb": noise["noise_rgb"],
         "reference_noise_luminance": noise["noise_luminance"],
         "reference_spp_per_half": noise["spp_per_half"], "variant": variant,
+        "samplers": list(samplers),
         "batch_spp": batch_spp, "picture_budget": times[pick], "load_start": load_start,
         "load_end": load_end, "cpu": cpu(), "date": str(datetime.date.today()), "rows": rows,
     }  # fmt: skip
+
+
+def mitsuba_best(row: dict, own: str = "") -> float:
+    """Mitsuba's best RMSE in a row: plain or OIDN, over its samplers (own "_own": against
+    the scene's own reference)."""
+    best = min(row[f"mitsuba_plain_rmse{own}"], row[f"mitsuba_oidn_rmse{own}"])
+    for key, run in row.items():
+        if key.startswith("mitsuba_") and isinstance(run, dict):
+            best = min(best, run[f"plain_rmse{own}"], run[f"oidn_rmse{own}"])
+    return best
 
 
 def own_error(rmse_value: float, noise: float) -> float:
@@ -240,9 +288,7 @@ def corrected_summary(records: list[dict], ours: str = "dpm_rmse", theirs: str =
     ratios = []
     for r in records:
         for x in r["rows"]:
-            other = (
-                x[theirs] if theirs in x else min(x["mitsuba_plain_rmse"], x["mitsuba_oidn_rmse"])
-            )
+            other = x[theirs] if theirs in x else mitsuba_best(x)
             ratios.append(corrected_ratio(r, {**x, "best": other}, ours, "best"))
     told = np.array([q for q in ratios if np.isfinite(q)])
     if not len(told):
@@ -282,15 +328,23 @@ def scaled_copies(records: list[dict]) -> list[str]:
         apart = rmse(
             read_exr(REFERENCES / r["own_reference"]), read_exr(REFERENCES / r["reference"])
         )
-        ratios = [
-            x["dpm_rmse_own"] / min(x["mitsuba_plain_rmse_own"], x["mitsuba_oidn_rmse_own"])
-            for x in r["rows"]
-        ]
+        ratios = [x["dpm_rmse_own"] / mitsuba_best(x, "_own") for x in r["rows"]]
         budgets = ", ".join(f"{x['budget']:g}" for x in r["rows"])
         lines.append(f"- {r['scene']} against {r['own_reference']} (RMSE {apart:.4f} from the "
                      f"twin's) at {budgets} s: dpm / Mitsuba best "
                      f"{', '.join(f'{q:.2f}' for q in ratios)}")  # fmt: skip
     return [*lines, ""]
+
+
+def independent(records: list[dict]) -> list[dict]:
+    """The records with each row's ratio against Mitsuba's first (`independent`) sampler."""
+    return [
+        {**r, "rows": [
+            {**x, "ratio": x["dpm_rmse"] / min(x["mitsuba_plain_rmse"], x["mitsuba_oidn_rmse"])}
+            for x in r["rows"]
+        ]}
+        for r in records
+    ]  # fmt: skip
 
 
 def report(records: list[dict]) -> str:
@@ -299,19 +353,25 @@ def report(records: list[dict]) -> str:
     records = sorted(records, key=lambda r: order.get(r["scene"], len(order)))
     head = ["scene", "W x H", "budget s", "dpm wall s", "passes", "dpm RMSE", "Mitsuba spp",
             "Mitsuba wall s", "Mitsuba plain RMSE", "Mitsuba OIDN RMSE",
-            "dpm / Mitsuba best", "noise-corrected"]  # fmt: skip
+            "multijitter spp", "multijitter plain / OIDN RMSE", "dpm / Mitsuba best",
+            "noise-corrected"]  # fmt: skip
 
     def corrected(r: dict, x: dict) -> str:
-        best = min(x["mitsuba_plain_rmse"], x["mitsuba_oidn_rmse"])
-        q = corrected_ratio(r, {**x, "best": best}, "dpm_rmse", "best")
+        q = corrected_ratio(r, {**x, "best": mitsuba_best(x)}, "dpm_rmse", "best")
         return f"{q:.2f}" if np.isfinite(q) else "below noise"
+
+    def jitter(x: dict) -> list[str]:
+        mj = x.get("mitsuba_multijitter")
+        if mj is None:
+            return ["–", "–"]
+        return [str(mj["spp"]), f"{mj['plain_rmse']:.4f} / {mj['oidn_rmse']:.4f}"]
 
     def table(group: list[dict]) -> list[str]:
         rows = [
             [r["scene"], r["size"], f"{x['budget']:g}", f"{x['dpm_s']:.2f}", str(x["passes"]),
              f"{x['dpm_rmse']:.4f}", str(x["mitsuba_spp"]), f"{x['mitsuba_s']:.2f}",
              f"{x['mitsuba_plain_rmse']:.4f}", f"{x['mitsuba_oidn_rmse']:.4f}",
-             f"{x['ratio']:.2f}", corrected(r, x)]
+             *jitter(x), f"{x['ratio']:.2f}", corrected(r, x)]
             for r in group for x in r["rows"]
         ]  # fmt: skip
         return markdown_table(head, rows)
@@ -337,7 +397,9 @@ def report(records: list[dict]) -> str:
         "wall time from launch to exit, both warm; Mitsuba time-boxed to dpm's measured wall",
         f"time, in batches of {batches} spp; RMSE against the scene's Mitsuba 3 reference",
         "(two halves, spp per scene below; a scaled copy against its scale-1 twin's, see the",
-        "end); Mitsuba's score is the better of its plain mean and its OIDN image.",
+        "end); Mitsuba's score is the best of its plain mean and its OIDN image over its",
+        "samplers (Mitsuba columns: `independent`, its default; multijitter columns: its",
+        "`multijitter` sampler, time-boxed the same; a record from before shows `–`).",
         f"Machine: {'; '.join(machines)}; Mitsuba {', '.join(variants)}; {', '.join(dates)}.",
         "Load averages (1, 5, 15 min) per scene below.",
         "",
@@ -347,6 +409,8 @@ def report(records: list[dict]) -> str:
         "",
         "Caustic scenes: " + summary(caustic),
         "",
+        "Against Mitsuba's `independent` sampler alone: " + summary(independent(caustic)),
+        "",
         "Noise-corrected (each side's RMSE² less the reference's noise², `own_error`): "
         + corrected_summary(caustic),
         "",
@@ -355,6 +419,8 @@ def report(records: list[dict]) -> str:
         *table(controls),
         "",
         "Controls: " + summary(controls),
+        "",
+        "Against Mitsuba's `independent` sampler alone: " + summary(independent(controls)),
         "",
         "Controls, noise-corrected: " + corrected_summary(controls),
         "",
@@ -381,6 +447,7 @@ def main() -> None:
     p.add_argument("scenes", nargs="*", help=f"scenes (default: all): {', '.join(UNSEEN)}")
     p.add_argument("--times", type=float, nargs="+", default=list(TIMES))
     p.add_argument("--batch-spp", type=int, default=BATCH_SPP, help="Mitsuba spp per batch")
+    p.add_argument("--samplers", nargs="+", default=list(SAMPLERS), help="Mitsuba's samplers")
     args = p.parse_args()
     unknown = set(args.scenes) - set(UNSEEN)
     if unknown:
@@ -390,7 +457,7 @@ def main() -> None:
         os.environ["DRJIT_LIBLLVM_PATH"] = env["DRJIT_LIBLLVM_PATH"]
     OUT.mkdir(parents=True, exist_ok=True)
     names = args.scenes or list(UNSEEN)
-    run = lambda n: run_scene(n, args.times, variant, args.batch_spp)  # noqa: E731
+    run = lambda n: run_scene(n, args.times, variant, args.batch_spp, tuple(args.samplers))  # noqa: E731
     save_records(OUT, names, run, report, TABLE)
 
 
