@@ -185,7 +185,12 @@ def _plain_numbers(rest: np.ndarray, counts: tuple[int, ...]) -> np.ndarray | No
     joined = " ".join(rest.tolist())
     if spaces.min() != spaces.max() or spaces[0] + 1 not in counts or "  " in joined:
         return None
-    try:  # a word that is not a number raises; tabs or a trailing space change the count
+    # Words one space apart exactly: a tab (not printable) or a space at either end of a line
+    # would shift numbers across lines and still add up to the right count.
+    ends = np.strings.startswith(rest, " ") | np.strings.endswith(rest, " ")
+    if not joined.isprintable() or ends.any():
+        return None
+    try:  # a word that is not a number raises
         values = np.fromstring(joined, sep=" ")
     except ValueError:
         return None

@@ -42,6 +42,9 @@ OTHER = {
     "a comment after a vertex": "v 0 0 0 # a\nv 1 0 0\nv 1 1 0\nf 1 2 3\n",
     "mixed face forms": SQUARE + UV + "f 1/1/1 2 3\n",
     "mixed forms in a file": SQUARE + UV + "f 1/1 2/2 3/3\nf 1 3 4\n",
+    "a tab inside a vt, a space after the last": SQUARE + "vt 0.1\t0.2 0.3 0.4\nvt 0.5 0.6 \n"
+    "f 1/1 2/2 3/1\n",
+    "two spaces before the first vt": SQUARE + "vt  0.5 0.6\nvt 0.1 0.2 0.3\t0.4\nf 1/1 2/2 3/1\n",
 }
 
 # Errors, with the line the statement reader names.
@@ -53,6 +56,7 @@ ERRORS = {
     "a word": ("v 0 0 0\nv 1 x 0\nv 1 1 0\nf 1 2 3\n", ":2:"),
     "an unknown statement": (SQUARE + "curv 0 1\nf 1 2 3\n", ":5:"),
     "usemtl without a name": (SQUARE + "usemtl\nf 1 2 3\n", ":5:"),
+    "a short vertex after a tab": ("v 1\t2 3 4\nv 7 8 9\nv 5 6 \nf 1 2 3\n", ":3:"),
 }
 
 
@@ -84,6 +88,7 @@ def test_other_files_go_to_the_statement_reader(tmp_path: Path, case: str) -> No
     assert _read_plain(path, _read_lines(path)) is None
     mesh = read_obj(path)
     assert len(mesh.faces) >= 1 and np.isfinite(mesh.vertices).all()
+    _assert_same(mesh, _read_any(path, _read_lines(path)))
 
 
 @pytest.mark.parametrize("case", sorted(ERRORS))

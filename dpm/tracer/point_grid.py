@@ -129,7 +129,7 @@ def _pairs(grid, radius, position, normal, slot, write, point, photon, distance)
             dy = grid.position[i, 1] - py
             dz = grid.position[i, 2] - pz
             d = math.sqrt(dx * dx + dy * dy + dz * dz)
-            if d >= radius[i]:
+            if not d < radius[i]:  # a NaN photon pairs with nothing
                 continue
             cos = (
                 grid.normal[i, 0] * normal[j, 0]
