@@ -148,11 +148,11 @@ def _read_plain(path: Path, lines: list[str]) -> ObjMesh | None:
     index = numbers[:, 0] - 1
     if index.min() < 0 or (index >= np.repeat(np.searchsorted(line_v, line_f), corners)).any():
         return None
+    first = np.cumsum(corners) - corners  # (F,) each face line's first corner
     uv = np.full(len(index), -1, np.int64)
     if fields > 1 and "//" not in joined:  # no such vt: that face is untextured, as in _read_any
         uv = numbers[:, 1] - 1
         defined = np.repeat(np.searchsorted(line_vt, line_f), corners)
-        first = np.cumsum(corners) - corners
         whole = np.logical_and.reduceat((uv >= 0) & (uv < defined), first)
         uv = np.where(np.repeat(whole, corners), uv, -1)
     materials = _plain_materials(path, lines, key)
@@ -163,7 +163,7 @@ def _read_plain(path: Path, lines: list[str]) -> ObjMesh | None:
     triangles = corners - 2
     line = np.repeat(np.arange(len(line_f)), triangles)
     j = np.arange(len(line)) - np.repeat(np.cumsum(triangles) - triangles, triangles) + 1
-    base = (np.cumsum(corners) - corners)[line]
+    base = first[line]
     corner = np.stack([base, base + j, base + j + 1], axis=1)
     return ObjMesh(
         vertices=vertices,
@@ -210,9 +210,9 @@ def _plain_materials(
     )
     if "" in used or "" in libraries:
         return None
-    names = list(dict.fromkeys(used))
-    current = [-1] + [names.index(name) for name in used]
-    return names, np.asarray(current, np.int32), [path.parent / lib for lib in libraries]
+    index = {name: i for i, name in enumerate(dict.fromkeys(used))}  # in order of first use
+    current = [-1] + [index[name] for name in used]
+    return list(index), np.asarray(current, np.int32), [path.parent / lib for lib in libraries]
 
 
 def _read_any(path: Path, lines: list[str]) -> ObjMesh:

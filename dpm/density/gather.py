@@ -30,9 +30,7 @@ if TYPE_CHECKING:
 
 POINTS_PER_CHUNK = 1 << 14  # K-nearest queries answered at once
 SPREAD = 4.0  # points wider than this times the 90th percentile radius are searched apart
-REBUILD = (
-    0.5  # a point grid is rebuilt when the 90th percentile radius shrinks below this × its own
-)
+REBUILD = 0.5  # point grids are rebuilt when the 90th percentile radius falls below this × theirs
 GATHER = "gather"  # the stopwatch stage of tree building and queries
 
 
@@ -132,7 +130,6 @@ class PointIndex:
         self.position = np.asarray(position, np.float64)
         self.normal = np.asarray(normal, np.float32)
         self.levels: list[tuple[np.ndarray, PointGrid]] = []  # (points, their grid)
-        self.typical = 0.0  # the 90th percentile radius the grids were built for
 
     def within(
         self, photons: PhotonMap, radius: np.ndarray | float, watch: Stopwatch | None = None
@@ -148,7 +145,6 @@ class PointIndex:
         parts = []
         if len(live) and len(photons):
             if not self._holds(radius, live):
-                self.typical = float(np.quantile(radius[live], 0.9))
                 self.levels = self._grids(live, radius)
             for ids, grid in self.levels:
                 point, photon, dist = grid_pairs(
@@ -172,9 +168,8 @@ class PointIndex:
             if (radius[ids] > grid.radius).any():
                 return False
             entered[ids] = True
-        return bool(entered[live].all()) and (
-            np.quantile(radius[live], 0.9) >= REBUILD * self.typical
-        )
+        typical = self.levels[0][1].side / 2  # the first grid's cells: 2 × its 90th percentile
+        return bool(entered[live].all()) and np.quantile(radius[live], 0.9) >= REBUILD * typical
 
     def _grids(self, ids: np.ndarray, radius: np.ndarray) -> list[tuple[np.ndarray, PointGrid]]:
         """Grids over the points `ids`, in cells twice their 90th percentile radius. A point

@@ -68,20 +68,15 @@ def bucket_count(n: int) -> int:
     return 1 << max(1, (2 * n - 1).bit_length())
 
 
-def sort_into_buckets(key: np.ndarray, buckets: int) -> tuple[np.ndarray, np.ndarray]:
-    """(start, order) of entries with bucket keys (E,) int64: (buckets + 1,) int64 first row
-    of each bucket, and (E,) int64 the entry of each row (stable: in entry order within)."""
-    order = np.argsort(key, kind="stable")
-    return np.searchsorted(key[order], np.arange(buckets + 1)).astype(np.int64), order
-
-
 def photon_grid(photons: PhotonMap, radius: float) -> PhotonGrid:
     """The grid of a photon map for queries of radius r > 0 (scene units)."""
     if not (math.isfinite(radius) and radius > 0):
         raise ValueError(f"the grid's radius must be positive and finite (got {radius})")
     buckets = bucket_count(len(photons))
     cells = np.floor(photons.position.astype(np.float64) / (2.0 * radius)).astype(np.int64)
-    start, order = sort_into_buckets(bucket(*cells.T, buckets - 1), buckets)
+    key = bucket(cells[:, 0], cells[:, 1], cells[:, 2], buckets - 1)
+    order = np.argsort(key, kind="stable")
+    start = np.searchsorted(key[order], np.arange(buckets + 1)).astype(np.int64)
     return PhotonGrid(
         start,
         photons.position[order].astype(np.float64),

@@ -6,10 +6,10 @@ Each point is entered in every cell (cubes of side `side`) that its ball meets, 
 SPPM, so a photon reads the one bucket its own cell hashes to; a point is entered once per
 bucket, and the distance test drops the points of other cells that share it. The grid holds
 for any radii within those it was built with (the progressive methods' radii only shrink):
-the search takes the current radii. A first parallel
-sweep counts each photon's pairs and a second writes them where the counts' running sum puts
-them: pairs come photon by photon, each photon's in bucket order, the same at any thread
-count. (This replaced a scipy cKDTree, whose import alone cost a render 0.13 s.)
+the search takes the current radii. A first parallel sweep counts each photon's pairs and a
+second writes them where the counts' running sum puts them: pairs come photon by photon, each
+photon's in bucket order, the same at any thread count. (This replaced a scipy cKDTree, whose
+import alone cost a render 0.13 s.)
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from dpm.tracer.photon_grid import NORMAL_COS, ball_bucket, bucket, bucket_count
+from dpm.tracer.photon_grid import NORMAL_COS, ball_bucket, ball_cells, bucket, bucket_count
 
 
 class PointGrid(NamedTuple):
@@ -50,19 +50,6 @@ def point_grid(
     )
 
 
-@nb.njit(cache=True, inline="always")
-def _cells(position, radius, side, i):
-    """The block of cells that point i's ball meets: first cell and cells along x, y, z."""
-    r = radius[i]
-    x0 = math.floor((position[i, 0] - r) / side)
-    y0 = math.floor((position[i, 1] - r) / side)
-    z0 = math.floor((position[i, 2] - r) / side)
-    cx = math.floor((position[i, 0] + r) / side) - x0 + 1
-    cy = math.floor((position[i, 1] + r) / side) - y0 + 1
-    cz = math.floor((position[i, 2] + r) / side) - z0 + 1
-    return x0, y0, z0, cx, cy, cz
-
-
 @nb.njit(cache=True)
 def _entries(position, radius, side, mask):
     """(start, point): (buckets + 1,) int64 first row of each bucket and (E,) int64 the point
@@ -70,7 +57,9 @@ def _entries(position, radius, side, mask):
     point order within a bucket (a counting sort: one sweep counts, a second places)."""
     start = np.zeros(mask + 2, np.int64)
     for i in range(len(position)):
-        x0, y0, z0, cx, cy, cz = _cells(position, radius, side, i)
+        x0, y0, z0, cx, cy, cz = ball_cells(
+            position[i, 0], position[i, 1], position[i, 2], radius[i], side
+        )
         for c in range(cx * cy * cz):
             h = ball_bucket(c, x0, y0, z0, cy, cz, mask)
             if h >= 0:
@@ -79,7 +68,9 @@ def _entries(position, radius, side, mask):
     fill = start[:-1].copy()
     point = np.empty(start[-1], np.int64)
     for i in range(len(position)):
-        x0, y0, z0, cx, cy, cz = _cells(position, radius, side, i)
+        x0, y0, z0, cx, cy, cz = ball_cells(
+            position[i, 0], position[i, 1], position[i, 2], radius[i], side
+        )
         for c in range(cx * cy * cz):
             h = ball_bucket(c, x0, y0, z0, cy, cz, mask)
             if h >= 0:
