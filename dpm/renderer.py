@@ -109,11 +109,12 @@ def _render(scene: Scene, options: RenderOptions, started: float) -> RenderResul
     method.prepare(bvh, camera, watch)
     if cls.renders_image:  # passes of its own (auto): it denoises what it should
         image, extra = method.render_image(bvh, camera, watch, started)
-        stats.update(
-            denoised=cls.denoises(options), width=camera.width, height=camera.height,
-            seed=options.seed, samples=camera.width * camera.height * extra["spp"],
-            triangles=int(len(scene.triangles)), bvh_nodes=bvh.n_nodes, **extra,
-        )  # fmt: skip
+        stats.update({
+            "denoised": cls.denoises(options), "width": camera.width, "height": camera.height,
+            "seed": options.seed, "samples": camera.width * camera.height * extra["spp"],
+            "triangles": int(len(scene.triangles)), "bvh_nodes": bvh.n_nodes,
+            **extra,  # its own "denoised": whether the image is the denoised one
+        })  # fmt: skip
         return RenderResult(image=image, stats=stats)
 
     w, h, spp = camera.width, camera.height, options.spp

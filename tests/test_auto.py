@@ -226,6 +226,41 @@ def test_a_pixel_with_no_caustic_is_judged_by_its_paths(glass, monkeypatch) -> N
     assert restored.mean() > 0.5, restored.mean()
 
 
+def test_without_mirror_or_glass_the_denoisers_errors_are_given_back_too(
+    diffuse, monkeypatch
+) -> None:
+    # No light is seen apart from the paths here: its (empty) estimate must not read as
+    # "error unknown" everywhere, which kept every denoised pixel, the light's edge blurred
+    # into the ceiling included (the Cornell box had 3-7 times the raw image's error).
+    monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal: color * 4.0)
+    full = render(diffuse, options(spp=48, seed=1)).image
+    plain = render(diffuse, options(spp=48, seed=1, denoise=False)).image
+    light = luminance(plain)
+    lit = light > 0.05 * light.max()
+    assert lit.sum() > 50
+    restored = np.isclose(full[lit], plain[lit], rtol=1e-4, atol=0).all(axis=1)
+    assert restored.mean() > 0.5, restored.mean()
+
+
+def test_the_denoiser_is_skipped_where_the_halves_show_it_costs_more_than_it_removes(
+    diffuse, monkeypatch
+) -> None:
+    # The real denoiser on a few noisy passes pays; a "denoiser" that flattens the image to
+    # its mean is judged by the other half of the paths, and after many passes the plain
+    # mean is kept, pixel for pixel.
+    early = render(diffuse, options(spp=4, seed=2))
+    assert early.stats["denoised"]
+    monkeypatch.setattr(
+        auto,
+        "denoise",
+        lambda color, albedo, normal: np.broadcast_to(color.mean((0, 1)), color.shape),
+    )
+    late = render(diffuse, options(spp=64, seed=2))
+    plain = render(diffuse, options(spp=64, seed=2, denoise=False))
+    assert not late.stats["denoised"]
+    np.testing.assert_array_equal(late.image, plain.image)
+
+
 def test_light_seen_in_glass_that_every_sample_finds_skips_the_denoiser(
     tmp_path: Path, monkeypatch
 ) -> None:

@@ -105,8 +105,13 @@ SEEN_ERROR = 0.6  # relative standard error of a pixel's light seen below which 
 # spread over the smallest window, of SPREAD_WINDOWS, whose sparse pixels hold that many.
 SPARSE_PHOTONS, SPREAD_WINDOWS = 1.0 / SEEN_ERROR**2, (3, 5, 9, 17, 33)
 MIN_CAUSTIC_SHARE = 1e-3  # caustics under this share of the first pass's light are left out
-# Seconds kept for what follows the last pass (denoising, writing): a fixed part and per pixel.
-FINISH_SECONDS, FINISH_SECONDS_PER_PIXEL = 0.05, 3e-6
+# Seconds kept for what follows the last pass (denoising, writing): a fixed part and per pixel,
+# and per pixel for `Passes.denoiser_pays` where it runs (two more denoiser calls, at half).
+FINISH_SECONDS, FINISH_SECONDS_PER_PIXEL, CHECK_SECONDS_PER_PIXEL = 0.05, 3e-6, 3e-6
+# The share of a denoised half's noise variance left in its output (`denoiser_pays`): the
+# middle of 0 (all removed) and 1 (all kept), set before any measurement, not fitted.
+PASS_THROUGH = 0.5
+SQRT2 = np.sqrt(2.0)  # a half's standard error per pixel, in the whole image's
 # The learned caustic filter's seconds per pixel on 2 cores (measured), and the most of a
 # --time budget it may take: past it the plan leaves it out.
 NETWORK_SECONDS_PER_PIXEL, NETWORK_SHARE = 4e-6, 0.15
@@ -327,14 +332,15 @@ class Auto(Method):
         """Passes, the plan, caustic photons, dropped samples, adaptive paths, the pixels
         given extra samples of the light seen in mirrors and glass (and those samples), the
         pixels whose caustic is the narrow kernel's, the first pass's seconds (and those
-        before it), and whether the first pass alone overran the budget."""
+        before it), whether the first pass alone overran the budget, and whether the image
+        is the denoised one (`Passes.denoiser_pays`)."""
         return {
             "passes": self.passes, "plan": self.plan.as_dict(), "spp": self.passes,
             "caustic_photons": self.caustic_photons, "nonfinite_samples": self.dropped,
             "extra_paths": self.extra_paths, "light_pixels": self.light_pixels,
             "light_samples": max(self.light_samples, 0), "sharp_pixels": self.sharp_pixels,
             "pass_seconds": self.pass_seconds, "setup_seconds": self.setup_seconds,
-            "overran": self.overran,
+            "overran": self.overran, "denoised": self.denoised,
         }  # fmt: skip
 
 
@@ -357,8 +363,10 @@ class Passes:
         self.albedo = np.zeros((self.pixels, 3), np.float64)
         self.normal = np.zeros((self.pixels, 3), np.float64)
         self.deadline = None if o.time is None else started + o.time
-        self.finish_seconds = FINISH_SECONDS + FINISH_SECONDS_PER_PIXEL * self.pixels * (
-            self.full and method.denoises(o)
+        denoised = self.full and method.denoises(o)
+        checked = denoised and not has_specular(scene)  # `denoiser_pays` may run
+        self.finish_seconds = FINISH_SECONDS + self.pixels * (
+            FINISH_SECONDS_PER_PIXEL * denoised + CHECK_SECONDS_PER_PIXEL * checked
         )
         # Photon paths per pass: without a budget, --photons shared by the --spp passes; with
         # one, --photons-per-pass or the plan's (the first pass already uses it, so a --time
@@ -559,6 +567,7 @@ class Passes:
         m, j, h, w = self.method, self.j, self.h, self.w
         m.passes, m.plan, m.caustic_photons = j, self.plan, self.state.photons
         m.dropped, m.extra_paths = self.dropped, self.extra_paths
+        m.denoised = False  # set below where the denoiser runs
         m.light_pixels = 0 if self.glassy is None else len(self.glassy)
         m.light_samples = int(sum(self.glow.half(k).count.sum() for k in (0, 1))) - j * self.pixels
         caustic, count = self.caustics()
@@ -580,13 +589,49 @@ class Passes:
                 caustic_error = share / np.sqrt(np.maximum(count, 1.0))
                 unseen = np.where(after[:, 0], 0, error)  # the light seen's, where denoised
                 total = np.sqrt(self.paths.standard_error() ** 2 + unseen**2 + caustic_error**2)
-                image = restore_certain(image, denoised, total.reshape(h, w))
+                restored = restore_certain(image, denoised, total.reshape(h, w))
+                m.denoised = self.denoiser_pays(total.reshape(h, w))
+                image = restored if m.denoised else image
         return image + np.where(after, seen, 0).astype(np.float32).reshape(h, w, 3)
+
+    def denoiser_pays(self, error: np.ndarray) -> bool:
+        """Whether the denoised image (after `restore_certain` with the pixels' standard errors
+        error (H, W)) is expected closer to the truth than the plain mean of the passes.
+
+        Judged only where every part of the image is in the two halves of the paths (no
+        caustic estimate and no light seen apart: those are shared by the halves, and their
+        noise would not show): each half is denoised and restored alone and compared with the
+        other, independent half, whose variance, known from the halves' difference, is taken
+        off. That gives the error of a denoised half; the full image's is taken as that less
+        PASS_THROUGH of the noise variance the second half removes, against the plain mean's
+        (the halves' difference / 4). Where the paths' noise is already low the denoiser's
+        blur costs more than it removes (the Cornell box from 64 passes, the light's edge)."""
+        if self.separate or self.state.photons > 0 or self.j < 2:
+            return True
+        with self.watch("denoise"):
+            shape, guides = (self.h, self.w, 3), self.guides()
+            halves = []
+            for k in (0, 1):
+                p = self.paths.half(k)
+                halves.append((p.radiance / np.maximum(p.count, 1)[:, None]).reshape(shape))
+            spread = float(np.mean((halves[0] - halves[1]) ** 2))  # var A + var B, per value
+            scores = [
+                np.mean((restore_certain(a, denoise(a, *guides), SQRT2 * error) - b) ** 2)
+                for a, b in ((halves[0], halves[1]), (halves[1], halves[0]))
+            ]
+            half = float(np.mean(scores)) - spread / 2
+            return half - PASS_THROUGH * (spread / 2 - spread / 4) < spread / 4
 
     def light_seen(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(P, 3) float64 light seen along the camera's specular chains per pixel, (P,) its
         standard error (luminance) and (P, 1) bool where it is known well enough to skip the
-        denoiser (not where one sample per half tells no error: inf)."""
+        denoiser (not where one sample per half tells no error: inf). Without mirrors or glass
+        nothing is seen apart (the paths carry the light): zero, known exactly."""
+        if not self.separate:
+            # (the glow holds no samples: its error would read "unknown" everywhere, and
+            # `restore_certain` would give back nothing of what the denoiser got wrong)
+            zero = np.zeros(self.pixels)
+            return np.zeros((self.pixels, 3)), zero, np.ones((self.pixels, 1), bool)
         seen, error = self.glow.mean(), self.glow.standard_error()
         return seen, error, (error < SEEN_ERROR * luminance(seen))[:, None]
 
