@@ -215,8 +215,10 @@ def write_markdown(path: Path = RESULTS / "estimators.md") -> None:
         "",
         "## Seconds per stage",
         "",
-        "Trace: caustic photon paths. Gather: cKDTree build and queries. Estimate: the rest of",
-        "the estimator (kernel sums, PPM/APPM statistics). For PPM/APPM-best, gather + estimate.",
+        "Trace: caustic photon paths. Gather: the photon search (PM: cKDTree build and",
+        "K-nearest queries; PPM/APPM/CPPM: the hashed point grid, `dpm.tracer.point_grid`).",
+        "Estimate: the rest of the estimator (kernel sums, PPM/APPM statistics). For",
+        "PPM/APPM-best, gather + estimate.",
         "",
     ]
     columns = {k: v for r in records for b in r["budgets"] for k, v in tabled(b).items()}
