@@ -204,6 +204,9 @@ def render_main(argv: Sequence[str] | None = None) -> int:
             plan = (
                 f"; {stats['passes']} passes, {stats['plan']['reason']}" if "plan" in stats else ""
             )
+            if plan and options.denoise is not False and options.component == "full":
+                if not stats["denoised"]:  # auto kept its plain mean: say why
+                    plan += "; not denoised: the halves of its paths show the plain mean is closer"
             print(f"wrote {', '.join(map(str, outputs))} ({stats['width']}x{stats['height']}"
                   f"{plan}): " + timing_summary(seconds))  # fmt: skip
 

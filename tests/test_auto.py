@@ -243,7 +243,7 @@ def test_without_mirror_or_glass_the_denoisers_errors_are_given_back_too(
 
 
 def test_the_denoiser_is_skipped_where_the_halves_show_it_costs_more_than_it_removes(
-    diffuse, monkeypatch
+    diffuse, monkeypatch, tmp_path: Path, capsys
 ) -> None:
     # The real denoiser on a few noisy passes pays; a "denoiser" that flattens the image to
     # its mean is judged by the other half of the paths, and after many passes the plain
@@ -259,6 +259,14 @@ def test_the_denoiser_is_skipped_where_the_halves_show_it_costs_more_than_it_rem
     plain = render(diffuse, options(spp=64, seed=2, denoise=False))
     assert not late.stats["denoised"]
     np.testing.assert_array_equal(late.image, plain.image)
+    # and the command line's summary says so
+    from dpm.cli import render_main
+
+    scene = write_scene(tmp_path, toml=CAMERA, stem="cli")
+    for flags, said in (([], True), (["--no-denoise"], False)):
+        argv = [str(scene), "--spp", "64", "-o", str(tmp_path / "o.exr"), *flags]
+        assert render_main(argv) == 0
+        assert ("not denoised" in capsys.readouterr().out) == said
 
 
 def test_light_seen_in_glass_that_every_sample_finds_skips_the_denoiser(
