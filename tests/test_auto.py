@@ -231,8 +231,10 @@ def test_without_mirror_or_glass_the_denoisers_errors_are_given_back_too(
 ) -> None:
     # No light is seen apart from the paths here: its (empty) estimate must not read as
     # "error unknown" everywhere, which kept every denoised pixel, the light's edge blurred
-    # into the ceiling included (the Cornell box had 3-7 times the raw image's error).
+    # into the ceiling included (the Cornell box had 3-7 times the raw image's error). The
+    # check that may skip the denoiser is held to "it pays", so that the restore is tested.
     monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal: color * 4.0)
+    monkeypatch.setattr(auto.Passes, "denoiser_pays", lambda self, error: True)
     full = render(diffuse, options(spp=48, seed=1)).image
     plain = render(diffuse, options(spp=48, seed=1, denoise=False)).image
     light = luminance(plain)
@@ -245,11 +247,12 @@ def test_without_mirror_or_glass_the_denoisers_errors_are_given_back_too(
 def test_the_denoiser_is_skipped_where_the_halves_show_it_costs_more_than_it_removes(
     diffuse, monkeypatch, tmp_path: Path, capsys
 ) -> None:
-    # The real denoiser on a few noisy passes pays; a "denoiser" that flattens the image to
-    # its mean is judged by the other half of the paths, and after many passes the plain
-    # mean is kept, pixel for pixel.
-    early = render(diffuse, options(spp=4, seed=2))
-    assert early.stats["denoised"]
+    # Each half, denoised alone, is judged against the other half. A "denoiser" that returns
+    # the converged image is kept; one that flattens the image to its mean is dropped, and
+    # the image is then the plain mean of the passes, pixel for pixel.
+    converged = render(diffuse, options(spp=4096, seed=9, denoise=False)).image
+    monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal: converged)
+    assert render(diffuse, options(spp=64, seed=2)).stats["denoised"]
     monkeypatch.setattr(
         auto,
         "denoise",

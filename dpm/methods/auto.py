@@ -106,8 +106,9 @@ SEEN_ERROR = 0.6  # relative standard error of a pixel's light seen below which 
 SPARSE_PHOTONS, SPREAD_WINDOWS = 1.0 / SEEN_ERROR**2, (3, 5, 9, 17, 33)
 MIN_CAUSTIC_SHARE = 1e-3  # caustics under this share of the first pass's light are left out
 # Seconds kept for what follows the last pass (denoising, writing): a fixed part and per pixel,
-# and per pixel for `Passes.denoiser_pays` where it runs (two more denoiser calls, at half).
-FINISH_SECONDS, FINISH_SECONDS_PER_PIXEL, CHECK_SECONDS_PER_PIXEL = 0.05, 3e-6, 3e-6
+# and per pixel for `Passes.denoiser_pays` where it runs (two more denoiser calls on whole
+# images, each 1.4-2.9 µs per pixel on 2 cores: alone, and with a test run beside it).
+FINISH_SECONDS, FINISH_SECONDS_PER_PIXEL, CHECK_SECONDS_PER_PIXEL = 0.05, 3e-6, 6e-6
 # The share of a denoised half's noise variance left in its output (`denoiser_pays`): the
 # middle of 0 (all removed) and 1 (all kept), set before any measurement, not fitted.
 PASS_THROUGH = 0.5
@@ -360,8 +361,9 @@ class Passes:
         self.narrow = PPMState.start(self.pixels, 1.0, ALPHA)  # the same at NARROW × its radii
         self.paths = Halves(self.h, self.w)
         self.extra_paths = 0
-        self.albedo = np.zeros((self.pixels, 3), np.float64)
-        self.normal = np.zeros((self.pixels, 3), np.float64)
+        # the denoiser's guides per half (albedo, normal sums of its passes): a half checked
+        # alone (`denoiser_pays`) must not be guided by the other half's samples
+        self.guide_sums = np.zeros((2, 2, self.pixels, 3))
         self.deadline = None if o.time is None else started + o.time
         denoised = self.full and method.denoises(o)
         checked = denoised and not has_specular(scene)  # `denoiser_pays` may run
@@ -453,8 +455,7 @@ class Passes:
                 )
             self.paths.add_pass(j % 2, part.reshape(self.pixels, 3))
             self.grid = None
-            self.albedo += a.reshape(self.pixels, 3)
-            self.normal += n.reshape(self.pixels, 3)
+            self.add_guides(a, n)
             self.dropped += bad
             return
         state = self.state
@@ -487,8 +488,7 @@ class Passes:
                     self.see_light(points.emitted.astype(np.float64))
             self.dropped += bad
         a, n = guides(points)  # the denoiser's guides, and the caustic filter's
-        self.albedo += a
-        self.normal += n
+        self.add_guides(a, n)
         if photons is not None:
             sppm_gather((state, self.narrow), points, photons, watch)
 
@@ -606,21 +606,21 @@ class Passes:
         PASS_THROUGH of the noise variance the second half removes, against the plain mean's
         (the halves' difference / 4). Where the paths' noise is already low the denoiser's
         blur costs more than it removes (the Cornell box from 64 passes, the light's edge)."""
-        if self.separate or self.state.photons > 0 or self.j < 2:
-            return True
+        if self.separate or self.state.photons > 0 or self.j < ADAPT_AFTER:
+            return True  # (below ADAPT_AFTER passes a half's few samples guide it poorly)
         with self.watch("denoise"):
-            shape, guides = (self.h, self.w, 3), self.guides()
-            halves = []
+            shape, halves = (self.h, self.w, 3), []
             for k in (0, 1):
                 p = self.paths.half(k)
                 halves.append((p.radiance / np.maximum(p.count, 1)[:, None]).reshape(shape))
             spread = float(np.mean((halves[0] - halves[1]) ** 2))  # var A + var B, per value
-            scores = [
-                np.mean((restore_certain(a, denoise(a, *guides), SQRT2 * error) - b) ** 2)
-                for a, b in ((halves[0], halves[1]), (halves[1], halves[0]))
+            scores = [  # each half guided by its own passes only
+                np.mean((restore_certain(a, denoise(a, *self.guides(k)), SQRT2 * error) - b) ** 2)
+                for k, (a, b) in enumerate(((halves[0], halves[1]), (halves[1], halves[0])))
             ]
             half = float(np.mean(scores)) - spread / 2
-            return half - PASS_THROUGH * (spread / 2 - spread / 4) < spread / 4
+            # (a tie, e.g. a noiseless image the denoiser leaves alone, keeps the denoiser)
+            return half - PASS_THROUGH * (spread / 2 - spread / 4) <= spread / 4
 
     def light_seen(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(P, 3) float64 light seen along the camera's specular chains per pixel, (P,) its
@@ -635,10 +635,19 @@ class Passes:
         seen, error = self.glow.mean(), self.glow.standard_error()
         return seen, error, (error < SEEN_ERROR * luminance(seen))[:, None]
 
-    def guides(self) -> tuple[np.ndarray, np.ndarray]:
-        """The denoiser's (H, W, 3) albedo and normal guides: the passes' means."""
+    def add_guides(self, albedo: np.ndarray, normal: np.ndarray) -> None:
+        """This pass's denoiser guides, albedo and normal ((P, 3) or (H, W, 3)), into its half."""
+        half = self.guide_sums[self.j % 2]
+        half[0] += albedo.reshape(self.pixels, 3)
+        half[1] += normal.reshape(self.pixels, 3)
+
+    def guides(self, half: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The denoiser's (H, W, 3) albedo and normal guides: the means over the passes, or
+        over half `half`'s (0: passes 0, 2, 4, ...; 1: passes 1, 3, ...)."""
+        sums = self.guide_sums.sum(0) if half is None else self.guide_sums[half]
+        n = self.j if half is None else (self.j + 1 - half) // 2
         shape = (self.h, self.w, 3)
-        return (self.albedo / self.j).reshape(shape), (self.normal / self.j).reshape(shape)
+        return (sums[0] / n).reshape(shape), (sums[1] / n).reshape(shape)
 
     def caustic_stats(self, chosen: tuple | None = None) -> CausticStats:
         """The passes' per-pixel caustic statistics, as the learned filter reads them (chosen:
@@ -651,7 +660,7 @@ class Passes:
         return CausticStats(
             self.h, self.w, self.j, s.irradiance(), n.irradiance(), s.count, n.count, own,
             count, spread_sparse(own, count, overlap, self.h, self.w), s.radius / fp,
-            np.log(fp / np.median(fp)), self.albedo / self.j, self.normal / self.j,
+            np.log(fp / np.median(fp)), *(g.reshape(-1, 3) for g in self.guides()),
         )  # fmt: skip
 
     def caustics(self) -> tuple[np.ndarray, np.ndarray]:
