@@ -50,6 +50,10 @@ class PixelPaths:
         self.radiance[pixels] += sums
         self.square[pixels] += squares
 
+    def mean(self) -> np.ndarray:
+        """(P, 3) float64 mean radiance of each pixel's paths (zero where it has none)."""
+        return self.radiance / np.maximum(self.count, 1)[:, None]
+
     def deviation(self) -> np.ndarray:
         """(P,) float64 standard deviation of a path's luminance per pixel."""
         n = np.maximum(self.count, 1)
@@ -109,8 +113,7 @@ class Halves:
         """(P, 3) float64 radiance per pixel: the mean of its halves' means (a half without
         paths: the other's)."""
         a, b = self.half(0), self.half(1)
-        mean_a = a.radiance / np.maximum(a.count, 1)[:, None]
-        mean_b = b.radiance / np.maximum(b.count, 1)[:, None]
+        mean_a, mean_b = a.mean(), b.mean()
         one = np.where((b.count > 0)[:, None], mean_b, mean_a)
         return np.where(((a.count > 0) & (b.count > 0))[:, None], (mean_a + mean_b) / 2, one)
 

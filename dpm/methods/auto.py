@@ -365,8 +365,9 @@ class Passes:
         # alone (`denoiser_pays`) must not be guided by the other half's samples
         self.guide_sums = np.zeros((2, 2, self.pixels, 3))
         self.deadline = None if o.time is None else started + o.time
+        self.separate = has_specular(scene)  # the light seen apart from the paths: see below
         denoised = self.full and method.denoises(o)
-        checked = denoised and not has_specular(scene)  # `denoiser_pays` may run
+        checked = denoised and not self.separate  # `denoiser_pays` may run
         self.finish_seconds = FINISH_SECONDS + self.pixels * (
             FINISH_SECONDS_PER_PIXEL * denoised + CHECK_SECONDS_PER_PIXEL * checked
         )
@@ -377,7 +378,7 @@ class Passes:
             self.given, self.why = max(1, o.photons // o.spp), "--photons / --spp"
         else:
             self.given, self.why = o.photons_per_pass, "--photons-per-pass"
-        self.plan = None if has_specular(scene) else make_plan(scene, self.pixels, 1.0, 0.0, None)
+        self.plan = None if self.separate else make_plan(scene, self.pixels, 1.0, 0.0, None)
         self.first_photons = self.given or max(1, round(PHOTONS_PER_PIXEL * self.pixels))
         self.dropped = 0
         self.filter = None  # the learned caustic filter's weights, where the plan uses it
@@ -388,7 +389,6 @@ class Passes:
         # varies (adaptive sampling, cross-fitted as for the paths). Where it is known to
         # SEEN_ERROR it is added after the denoiser (which takes such specks for noise). The
         # paths (and so their adaptive sampling) carry the rest.
-        self.separate = has_specular(scene)
         self.glassy = (
             np.flatnonzero(specular_pixels(scene, bvh, camera))
             if self.separate and self.full
@@ -589,9 +589,9 @@ class Passes:
                 caustic_error = share / np.sqrt(np.maximum(count, 1.0))
                 unseen = np.where(after[:, 0], 0, error)  # the light seen's, where denoised
                 total = np.sqrt(self.paths.standard_error() ** 2 + unseen**2 + caustic_error**2)
-                restored = restore_certain(image, denoised, total.reshape(h, w))
-                m.denoised = self.denoiser_pays(total.reshape(h, w))
-                image = restored if m.denoised else image
+                total = total.reshape(h, w)
+                m.denoised = self.denoiser_pays(total)
+                image = restore_certain(image, denoised, total) if m.denoised else image
         return image + np.where(after, seen, 0).astype(np.float32).reshape(h, w, 3)
 
     def denoiser_pays(self, error: np.ndarray) -> bool:
@@ -606,13 +606,10 @@ class Passes:
         PASS_THROUGH of the noise variance the second half removes, against the plain mean's
         (the halves' difference / 4). Where the paths' noise is already low the denoiser's
         blur costs more than it removes (the Cornell box from 64 passes, the light's edge)."""
-        if self.separate or self.state.photons > 0 or self.j < ADAPT_AFTER:
+        if self.separate or self.j < ADAPT_AFTER:  # (no mirror or glass: no photons either)
             return True  # (below ADAPT_AFTER passes a half's few samples guide it poorly)
         with self.watch("denoise"):
-            shape, halves = (self.h, self.w, 3), []
-            for k in (0, 1):
-                p = self.paths.half(k)
-                halves.append((p.radiance / np.maximum(p.count, 1)[:, None]).reshape(shape))
+            halves = [self.paths.half(k).mean().reshape(self.h, self.w, 3) for k in (0, 1)]
             spread = float(np.mean((halves[0] - halves[1]) ** 2))  # var A + var B, per value
             scores = [  # each half guided by its own passes only
                 np.mean((restore_certain(a, denoise(a, *self.guides(k)), SQRT2 * error) - b) ** 2)
