@@ -201,9 +201,11 @@ def render_main(argv: Sequence[str] | None = None) -> int:
             write_json(args.stats, result.stats)
         if not args.quiet:
             stats = result.stats
-            plan = (
-                f"; {stats['passes']} passes, {stats['plan']['reason']}" if "plan" in stats else ""
-            )
+            plan = ""
+            if "plan" in stats:
+                paths = f" ({stats['spp']} paths per pixel)"
+                paths = paths if stats["spp"] != stats["passes"] else ""
+                plan = f"; {stats['passes']} passes{paths}, {stats['plan']['reason']}"
             if plan and options.denoise is not False and options.component == "full":
                 if not stats["denoised"]:  # auto kept its plain mean: say why
                     plan += "; not denoised: the halves of its paths show the plain mean is closer"

@@ -27,7 +27,13 @@ from dpm.estimators.ppm import PPMState
 from dpm.io import KNEE, linear_to_srgb8, tone_map
 from dpm.methods import auto
 from dpm.renderer import RenderOptions, render
-from dpm.tracer import build_bvh, specular_pixels, trace_emitted
+from dpm.tracer import (
+    build_bvh,
+    specular_pixels,
+    trace_emitted,
+    trace_listed,
+    trace_pixel_sums,
+)
 from dpm.tracer.sampling import sobol2
 from dpm.tracer.visible import camera_ray
 
@@ -137,11 +143,57 @@ def test_same_seed_same_image_whatever_the_thread_count(glass) -> None:
     np.testing.assert_array_equal(*images)
 
 
+def test_passes_of_whole_pixels_give_the_same_image_whatever_the_thread_count(diffuse) -> None:
+    import numba
+
+    images = []
+    for threads in (1, numba.config.NUMBA_NUM_THREADS):
+        numba.set_num_threads(threads)
+        images.append(render(diffuse, options(spp=24, seed=2)).image)
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    np.testing.assert_array_equal(*images)
+
+
 def test_adaptive_extra_paths_are_spent_and_reproducible(glass) -> None:
     passes = auto.ADAPT_AFTER + 4
     first, again = (render(glass, options(spp=passes, seed=6)) for _ in range(2))
     assert first.stats["extra_paths"] > 0
     np.testing.assert_array_equal(first.image, again.image)
+
+
+def test_passes_of_whole_pixels_double_up_to_the_paths_asked_for(diffuse) -> None:
+    # Without mirrors or glass a pass takes whole pixels: 1, 1, 2, 4, 8 paths per pixel, then
+    # what is left of --spp (4): six passes, 20 paths per pixel.
+    result = render(diffuse, options(spp=20, seed=3))
+    assert result.stats["passes"] == 6 and result.stats["spp"] == 20
+    assert result.stats["samples"] == 20 * 24 * 16
+    with_glass = render(diffuse, options(spp=20, seed=3, component="caustic"))
+    assert with_glass.stats["passes"] == 20  # no paths: one sample per pass
+
+
+def test_a_budgeted_render_of_whole_pixels_is_reproduced_by_its_paths(diffuse, monkeypatch) -> None:
+    # Every pass takes 0.1 s on this clock whatever its paths, so the budget's last pass is
+    # cut to what the time left holds; --spp of the render's paths makes the same passes.
+    monkeypatch.setattr(auto, "time", FakeClock(0.1))
+    timed = render(diffuse, options(time=1.7, seed=4), started=0.0)
+    assert timed.stats["spp"] > timed.stats["passes"] > 1
+    again = render(diffuse, options(spp=timed.stats["spp"], seed=4))
+    assert again.stats["passes"] == timed.stats["passes"]
+    np.testing.assert_array_equal(timed.image, again.image)
+
+
+def test_whole_pixel_sums_are_those_of_the_same_paths_listed(diffuse) -> None:
+    # trace_pixel_sums and trace_listed draw the same random streams for k paths per pixel
+    # (without a stratified sequence): the same radiance sums and squared luminances.
+    bvh, camera, k = build_bvh(diffuse), diffuse.camera, 5
+    sums, squares, *_ = trace_pixel_sums(diffuse, bvh, camera, k, 7)
+    pixels = np.arange(camera.width * camera.height)
+    listed, listed_squares, _ = trace_listed(
+        diffuse, bvh, camera, pixels, np.full(len(pixels), k), 7
+    )
+    np.testing.assert_allclose(sums, listed, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(squares, listed_squares, rtol=1e-12, atol=1e-12)
+    assert (squares >= luminance(sums) ** 2 / k * (1 - 1e-12)).all() and squares.max() > 0
 
 
 def test_a_scene_without_mirror_or_glass_traces_no_photons(diffuse) -> None:

@@ -1,7 +1,7 @@
 """Adaptive sampling: where a pass's extra camera paths go, without biasing the image.
 
-After ADAPT_AFTER passes, every pass adds up to EXTRA_PER_PIXEL × pixels camera paths,
-shared in proportion to how far each pixel falls short of Neyman's allocation (paths in
+After ADAPT_AFTER paths per pixel, every pass adds up to EXTRA_PER_PIXEL × pixels camera
+paths for each path per pixel it takes, shared in proportion to how far each pixel falls short of Neyman's allocation (paths in
 proportion to the pixel's standard deviation, which minimises the summed variance of the
 pixel means for a given number of paths). The pixels that gain are the few whose paths vary
 wildly, such as a small light seen through glass or water: there one path in a hundred
@@ -25,7 +25,7 @@ import numpy as np
 from dpm.density.base import luminance
 from dpm.filters import box_mean
 
-ADAPT_AFTER = 8  # passes before the first extra paths (a deviation needs a few paths)
+ADAPT_AFTER = 8  # paths per pixel before the first extra paths (a deviation needs a few)
 EXTRA_PER_PIXEL = 0.25  # extra paths per pass, at most, per pixel of the image
 EXTRA_CAP = 64  # extra paths one pixel gets in one pass, at most
 SMOOTH = 5  # pixels across the neighbourhood whose variance a pixel's may take
@@ -94,6 +94,11 @@ class Halves:
         """One path per pixel, radiance (P, 3), into half 0 or 1."""
         radiance = radiance.astype(np.float64)
         self.base[half].add(slice(None), 1, radiance, luminance(radiance) ** 2)
+
+    def add_paths(self, half: int, count: int, sums: np.ndarray, squares: np.ndarray) -> None:
+        """count paths per pixel into half 0 or 1: their radiance sums (P, 3) and the sums of
+        their squared luminances (P,)."""
+        self.base[half].add(slice(None), count, sums, squares)
 
     def half(self, h: int) -> PixelPaths:
         """All paths of half h (its one-per-pass and its extra ones)."""

@@ -7,7 +7,7 @@ import numpy as np
 from dpm.scene import Scene
 from dpm.tracer import _cache  # noqa: F401  (first: drops stale compiled kernels)
 from dpm.tracer.bvh import BVH, BVHArrays, build_bvh_from_triangles
-from dpm.tracer.path import shade, trace_listed, trace_pixels
+from dpm.tracer.path import shade, trace_listed, trace_pixel_sums, trace_pixels
 from dpm.tracer.photons import PhotonMap, trace_photons
 from dpm.tracer.traverse import any_hit_batch, brute_force_batch, closest_hit_batch
 from dpm.tracer.visible import (
@@ -29,6 +29,7 @@ __all__ = [
     "shade",
     "trace_photons",
     "trace_listed",
+    "trace_pixel_sums",
     "trace_pixels",
     "specular_pixels",
     "trace_emitted",

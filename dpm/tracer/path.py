@@ -310,11 +310,11 @@ def path_pixel(
 @nb.njit(cache=True, parallel=True, error_model="numpy")
 def pixels_kernel(
     bvh, depth, sc, cam, width, height, row0, row1, spp, seed, sequence, first, eps, caustics,
-    image, albedo, normal,
+    image, albedo, normal, square,
 ):  # fmt: skip
     """Per pixel of image rows row0..row1-1 (row-major, (P, 3) outputs): the mean radiance of
-    spp camera paths and the mean denoiser guides (`dpm.denoise.guides`); returns (visible
-    points found, non-finite samples dropped)."""
+    spp camera paths, the mean denoiser guides (`dpm.denoise.guides`) and (P,) the sum of the
+    paths' squared luminances; returns (visible points found, non-finite samples dropped)."""
     n = (row1 - row0) * width
     per_task = max(1, SAMPLES_PER_TASK // spp)
     n_tasks = (n + per_task - 1) // per_task
@@ -333,6 +333,7 @@ def pixels_kernel(
             image[p, 0], image[p, 1], image[p, 2] = v[0] / spp, v[1] / spp, v[2] / spp
             albedo[p, 0], albedo[p, 1], albedo[p, 2] = v[3] / spp, v[4] / spp, v[5] / spp
             normal[p, 0], normal[p, 1], normal[p, 2] = v[6] / spp, v[7] / spp, v[8] / spp
+            square[p] = v[11]
             hits[task] += v[9]
             bad[task] += v[10]
     return hits.sum(), bad.sum()
@@ -354,17 +355,55 @@ def trace_pixels(
     `shade`, in one pass that keeps no per-sample arrays; it equals them within float
     rounding. With `sequence` (seed, first), sample s of a pixel is point first + s of the
     pixel's stratified sequence in its position and first vertices (`stratified2`)."""
+    image, albedo, normal, _, hits, bad = _pixels(
+        scene, bvh, camera, spp, seed, rows, caustics, sequence
+    )
+    shape = (rows[1] - rows[0], camera.width, 3)
+    out = tuple(a.astype(np.float32).reshape(shape) for a in (image, albedo, normal))
+    return (*out, hits, bad)
+
+
+def trace_pixel_sums(
+    scene: Scene,
+    bvh: BVH,
+    camera: Camera,
+    spp: int,
+    seed: int,
+    sequence: tuple[int, int] | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """`trace_pixels` of the whole image without the caustics at the visible point, as
+    `auto`'s passes take it: (P, 3) float64 radiance summed over each pixel's spp paths, (P,)
+    float64 sum of their squared luminances, (P, 3) mean denoiser albedo and normal, and the
+    non-finite samples dropped."""
+    image, albedo, normal, square, _, bad = _pixels(
+        scene, bvh, camera, spp, seed, (0, camera.height), False, sequence
+    )
+    return image * spp, square, albedo, normal, bad
+
+
+def _pixels(
+    scene: Scene,
+    bvh: BVH,
+    camera: Camera,
+    spp: int,
+    seed: int,
+    rows: tuple[int, int],
+    caustics: bool,
+    sequence: tuple[int, int] | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, int]:
+    """`pixels_kernel` on rows[0]..rows[1]-1: (P, 3) float64 mean radiance, albedo, normal,
+    (P,) sum of squared luminances, visible points found, non-finite samples dropped."""
     row0, row1 = rows
-    shape = (row1 - row0, camera.width, 3)
-    image, albedo, normal = (np.empty((shape[0] * shape[1], 3)) for _ in range(3))
+    pixels = (row1 - row0) * camera.width
+    image, albedo, normal = (np.empty((pixels, 3)) for _ in range(3))
+    square = np.empty(pixels)
     qseed, first = (-1, 0) if sequence is None else sequence
     hits, bad = pixels_kernel(
         bvh.arrays, bvh.depth, scene.kernel_arrays(), camera.basis(), camera.width,
         camera.height, row0, row1, spp, seed, qseed, first, spawn_offset(scene), caustics,
-        image, albedo, normal,
+        image, albedo, normal, square,
     )  # fmt: skip
-    out = tuple(a.astype(np.float32).reshape(shape) for a in (image, albedo, normal))
-    return (*out, int(hits), int(bad))
+    return image, albedo, normal, square, int(hits), int(bad)
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
