@@ -25,8 +25,17 @@ class Camera:
         """(4, 3) float64 rows: origin, forward, right·tan(fov/2), up·tan(fov/2)·height/width.
 
         The ray through image point (x, y) in pixels (x right, y down, pixel centres at +0.5)
-        has direction forward + (2x/W − 1)·right + (1 − 2y/H)·up, unnormalised.
+        has direction forward + (2x/W − 1)·right + (1 − 2y/H)·up, unnormalised. Made once
+        per camera (a render's passes ask for it several times each) and shared: read it only.
         """
+        cached = self.__dict__.get("_basis")
+        if cached is None:
+            cached = self._make_basis()
+            object.__setattr__(self, "_basis", cached)  # (frozen: a cache, not a field)
+        return cached
+
+    def _make_basis(self) -> np.ndarray:
+        """`basis`, computed."""
         forward = self.target - self.origin
         forward = forward / np.linalg.norm(forward)
         right = np.cross(forward, self.up)

@@ -20,10 +20,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba as nb
 import numpy as np
 
 from dpm.density.base import luminance
-from dpm.filters import box_mean
 
 ADAPT_AFTER = 8  # paths per pixel before the first extra paths (a deviation needs a few)
 EXTRA_PER_PIXEL = 0.25  # extra paths per pass, at most, per pixel of the image
@@ -150,10 +150,34 @@ class Halves:
         """(P,) per-pixel values var (P,), or the SMOOTH × SMOOTH mean of the finite ones where
         that is larger (an infinite value, unknown, stays so and is left out of its
         neighbours' means)."""
-        known = np.isfinite(var)
-        shape = (self.height, self.width)
-        total = box_mean(np.where(known, var, 0.0).reshape(shape), SMOOTH, mode="nearest")
-        share = box_mean(known.reshape(shape).astype(np.float64), SMOOTH, mode="nearest")
-        some = share > 0.5 / SMOOTH**2  # at least one finite value (sums round off, not to 0)
-        near = np.where(some, total / np.where(some, share, 1.0), 0.0)
+        near = _known_mean(var.reshape(self.height, self.width), SMOOTH)
         return np.maximum(var, near.ravel())
+
+
+@nb.njit(cache=True)
+def _known_mean(values, size):
+    """(H, W) float64 mean of the finite values (H, W) in each pixel's size × size window
+    (beyond the image: the nearest edge pixel's, as `box_mean`'s "nearest"), 0 where the
+    window holds none: sums and counts along rows, then along columns. (In NumPy, two box
+    means took 1.5 ms of every 128² pass.)"""
+    h, w = values.shape
+    lo = size // 2
+    total, known = np.zeros((h, w)), np.zeros((h, w))
+    for y in range(h):
+        for x in range(w):
+            for dx in range(-lo, size - lo):
+                v = values[y, min(max(x + dx, 0), w - 1)]
+                if np.isfinite(v):
+                    total[y, x] += v
+                    known[y, x] += 1.0
+    out = np.zeros((h, w))
+    for y in range(h):
+        for x in range(w):
+            t = n = 0.0
+            for dy in range(-lo, size - lo):
+                row = min(max(y + dy, 0), h - 1)
+                t += total[row, x]
+                n += known[row, x]
+            if n > 0:
+                out[y, x] = t / n
+    return out

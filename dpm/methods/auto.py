@@ -210,6 +210,7 @@ def warm_first_kernels(scene: Scene, bvh: BVH, camera: Camera) -> None:
     times a later one (0.30-0.38 s against 0.07-0.08 s on the unseen spheres and vase), and
     judged by it, a 2-s budget stopped after one pass where it had room for several."""
     tiny, sequence = camera.with_resolution(2, 2), (0, 0)
+    Halves(2, 2).plan_extra(0, 1, 1)  # adaptive sampling's neighbourhood means
     if not has_specular(scene):  # the plan is made before the first pass: whole pixels
         trace_pixel_sums(scene, bvh, tiny, 1, 0, sequence)
         return

@@ -20,7 +20,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from dpm.tracer.photon_grid import NORMAL_COS, ball_bucket, ball_cells, bucket, bucket_count
+from dpm.tracer.photon_grid import NORMAL_COS, ball_cells, bucket, bucket_count
 
 
 class PointGrid(NamedTuple):
@@ -54,25 +54,42 @@ def point_grid(
 def _entries(position, radius, side, mask):
     """(start, point): (buckets + 1,) int64 first row of each bucket and (E,) int64 the point
     of each row, each point in the buckets of the cells its ball meets, once per bucket, in
-    point order within a bucket (a counting sort: one sweep counts, a second places)."""
+    point order within a bucket (a counting sort: one sweep hashes each point's cells and
+    counts, a second places). A cell whose bucket an earlier cell of the same ball has is
+    left out (`ball_bucket`'s rule, by comparing stored buckets: recomputing them, with the
+    integer divisions of the cell's index, took most of a 128² pass's 4.6 ms here)."""
+    n = len(position)
+    first = np.zeros(n + 1, np.int64)  # point i's cells are rows first[i] … first[i+1] − 1
+    for i in range(n):
+        _, _, _, cx, cy, cz = ball_cells(
+            position[i, 0], position[i, 1], position[i, 2], radius[i], side
+        )
+        first[i + 1] = first[i] + cx * cy * cz
+    cells = np.empty(first[n], np.int64)  # each cell's bucket, −1 where the ball has it already
     start = np.zeros(mask + 2, np.int64)
-    for i in range(len(position)):
+    for i in range(n):
         x0, y0, z0, cx, cy, cz = ball_cells(
             position[i, 0], position[i, 1], position[i, 2], radius[i], side
         )
-        for c in range(cx * cy * cz):
-            h = ball_bucket(c, x0, y0, z0, cy, cz, mask)
-            if h >= 0:
-                start[h + 1] += 1
+        k = first[i]
+        for a in range(cx):
+            for b in range(cy):
+                for c in range(cz):  # z fastest, as `ball_bucket` numbers them
+                    h = bucket(x0 + a, y0 + b, z0 + c, mask)
+                    for e in range(first[i], k):
+                        if cells[e] == h:
+                            h = -1
+                            break
+                    cells[k] = h
+                    k += 1
+                    if h >= 0:
+                        start[h + 1] += 1
     start = np.cumsum(start)
     fill = start[:-1].copy()
     point = np.empty(start[-1], np.int64)
-    for i in range(len(position)):
-        x0, y0, z0, cx, cy, cz = ball_cells(
-            position[i, 0], position[i, 1], position[i, 2], radius[i], side
-        )
-        for c in range(cx * cy * cz):
-            h = ball_bucket(c, x0, y0, z0, cy, cz, mask)
+    for i in range(n):
+        for e in range(first[i], first[i + 1]):
+            h = cells[e]
             if h >= 0:
                 point[fill[h]] = i
                 fill[h] += 1
