@@ -1,10 +1,11 @@
 """Adaptive sampling: where a pass's extra camera paths go, without biasing the image.
 
 After ADAPT_AFTER paths per pixel, every pass adds up to EXTRA_PER_PIXEL × pixels camera
-paths for each path per pixel it takes, shared in proportion to how far each pixel falls short of Neyman's allocation (paths in
-proportion to the pixel's standard deviation, which minimises the summed variance of the
-pixel means for a given number of paths). The pixels that gain are the few whose paths vary
-wildly, such as a small light seen through glass or water: there one path in a hundred
+paths for each path per pixel it takes, shared in proportion to how far each pixel falls
+short of Neyman's allocation (paths in proportion to the pixel's standard deviation, which
+minimises the summed variance of the pixel means for a given number of paths). The pixels
+that gain are the few whose paths vary wildly, such as a small light seen through glass or
+water: there one path in a hundred
 finds the light, and a handful of such pixels can hold nearly all of an image's squared error.
 
 Choosing pixels by their own paths biases their mean low: a pixel whose rare bright paths
