@@ -195,3 +195,10 @@ def save_records(
     with atomic(table) as tmp:
         tmp.write_text(text)
     print(text)
+
+
+def passes_text(row: dict) -> str:
+    """A row's `auto` passes, with its paths per pixel where they differ (passes of whole
+    pixels take several; rows recorded before that have no "spp")."""
+    spp = row.get("spp", row["passes"])
+    return str(row["passes"]) + (f" ({spp} spp)" if spp != row["passes"] else "")

@@ -33,7 +33,7 @@ import imageio.v3 as iio
 import numpy as np
 from hybrid import reference, reference_noise
 
-from common import RESULTS, SCENES, cpu, linear_fit, markdown_table, secant_spp
+from common import RESULTS, SCENES, cpu, linear_fit, markdown_table, passes_text, secant_spp
 from dpm import load_scene
 from dpm.io import linear_to_srgb8, read_exr
 from dpm.methods.auto import has_specular
@@ -152,7 +152,7 @@ def run_scene(name: str, width: int, times: list[float]) -> dict:
                 theirs, theirs_s = mitsuba_run(desc, spp, i + 1)
             rows.append({
                 "budget": budget, "dpm_s": ours_s, "dpm_rmse": rmse(ours, ref),
-                "passes": stats["passes"], "plan": stats["plan"]["reason"],
+                "passes": stats["passes"], "spp": stats["spp"], "plan": stats["plan"]["reason"],
                 "mitsuba_s": theirs_s, "mitsuba_spp": spp, "mitsuba_rmse": rmse(theirs, ref),
                 "images": (ours, theirs),
             })  # fmt: skip
@@ -179,7 +179,7 @@ def report(records: list[dict]) -> str:
             if ratio > 0.7:
                 losses.append(f"{r['scene']} at {x['budget']:g} s ({ratio:.2f})")
             rows.append([
-                r["scene"], f"{x['budget']:g}", f"{x['dpm_s']:.2f}", str(x["passes"]),
+                r["scene"], f"{x['budget']:g}", f"{x['dpm_s']:.2f}", passes_text(x),
                 f"{x['dpm_rmse']:.4f}", str(x["mitsuba_spp"]), f"{x['mitsuba_s']:.2f}",
                 f"{x['mitsuba_rmse']:.4f}", f"{ratio:.2f}",
             ])  # fmt: skip

@@ -44,7 +44,7 @@ sys.path.insert(0, str(Path(__file__).parent / "scenes"))
 from make_unseen import CONTROLS, UNSEEN, unseen_scenes  # noqa: E402
 from unseen_references import OUT as REFERENCES  # noqa: E402
 
-from common import RESULTS, cpu, markdown_table, save_records  # noqa: E402
+from common import RESULTS, cpu, markdown_table, passes_text, save_records  # noqa: E402
 from dpm import load_scene  # noqa: E402
 from dpm.io import read_exr  # noqa: E402
 from dpm.metrics import rmse  # noqa: E402
@@ -96,7 +96,7 @@ def run_scene(name: str, times: list[float]) -> dict:
             )
             plain_rmse, oidn_rmse, ours_rmse = rmse(plain, ref), rmse(oidn, ref), rmse(ours, ref)
             rows.append({
-                "budget": budget, "dpm_s": ours_s, "passes": stats["passes"],
+                "budget": budget, "dpm_s": ours_s, "passes": stats["passes"], "spp": stats["spp"],
                 "plan": stats.get("plan", {}).get("reason"), "dpm_rmse": ours_rmse,
                 "luxcore_s": theirs_s, "luxcore_spp": info["spp"],
                 "luxcore_start_s": info["seconds_start"], "luxcore_plain_rmse": plain_rmse,
@@ -140,7 +140,7 @@ def report(records: list[dict]) -> str:
 
     def table(group: list[dict]) -> list[str]:
         rows = [
-            [r["scene"], r["size"], f"{x['budget']:g}", f"{x['dpm_s']:.2f}", str(x["passes"]),
+            [r["scene"], r["size"], f"{x['budget']:g}", f"{x['dpm_s']:.2f}", passes_text(x),
              f"{x['dpm_rmse']:.4f}", f"{x['luxcore_spp']:.1f}",
              f"{x['luxcore_s']:.2f}" + (" (late)" if x["luxcore_s"] > OVERRUN * x["dpm_s"]
                                          else ""),

@@ -57,7 +57,7 @@ from make_unseen import CONTROLS, UNSEEN, unit_scale, unseen_scenes  # noqa: E40
 from unseen_references import OUT as REFERENCES  # noqa: E402
 from unseen_references import mitsuba_variant  # noqa: E402
 
-from common import RESULTS, cpu, markdown_table, save_records  # noqa: E402
+from common import RESULTS, cpu, markdown_table, passes_text, save_records  # noqa: E402
 from dpm import load_scene  # noqa: E402
 from dpm.io import linear_to_srgb8, read_exr  # noqa: E402
 from dpm.metrics import rmse  # noqa: E402
@@ -210,7 +210,7 @@ def run_scene(
             plain, oidn, theirs_s, info = runs[samplers[0]]
             plain_rmse, oidn_rmse = rmse(plain, ref), rmse(oidn, ref)
             rows.append({
-                "budget": budget, "dpm_s": ours_s, "passes": stats["passes"],
+                "budget": budget, "dpm_s": ours_s, "passes": stats["passes"], "spp": stats["spp"],
                 "plan": stats.get("plan", {}).get("reason"), "dpm_rmse": ours_rmse,
                 "mitsuba_s": theirs_s, "mitsuba_spp": info["spp"],
                 "mitsuba_plain_rmse": plain_rmse, "mitsuba_oidn_rmse": oidn_rmse,
@@ -234,7 +234,7 @@ def run_scene(
             rows[-1]["ratio"] = ours_rmse / rows[-1]["mitsuba_best_rmse"]
             best = min(runs.values(), key=lambda run: min(rmse(run[0], ref), rmse(run[1], ref)))
             images.append((ours, best[0] if rmse(best[0], ref) <= rmse(best[1], ref) else best[1]))
-            shown = ("dpm_s", "passes", "dpm_rmse", "mitsuba_s", "mitsuba_spp",
+            shown = ("dpm_s", "passes", "spp", "dpm_rmse", "mitsuba_s", "mitsuba_spp",
                      "mitsuba_plain_rmse", "mitsuba_oidn_rmse", "ratio")  # fmt: skip
             print(f"{name} {budget:g} s:", {k: round(rows[-1][k], 4) for k in shown}, flush=True)
     load_end = load()
@@ -368,7 +368,7 @@ def report(records: list[dict]) -> str:
 
     def table(group: list[dict]) -> list[str]:
         rows = [
-            [r["scene"], r["size"], f"{x['budget']:g}", f"{x['dpm_s']:.2f}", str(x["passes"]),
+            [r["scene"], r["size"], f"{x['budget']:g}", f"{x['dpm_s']:.2f}", passes_text(x),
              f"{x['dpm_rmse']:.4f}", str(x["mitsuba_spp"]), f"{x['mitsuba_s']:.2f}",
              f"{x['mitsuba_plain_rmse']:.4f}", f"{x['mitsuba_oidn_rmse']:.4f}",
              *jitter(x), f"{x['ratio']:.2f}", corrected(r, x)]
