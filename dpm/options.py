@@ -56,7 +56,7 @@ class RenderOptions:
     )  # fmt: skip
     time: float | None = _option(
         None, "render in passes until this many seconds of wall time (from the process start)",
-        scoped=True, default_text="none: --spp passes", metavar="SECONDS",
+        scoped=True, default_text="none: --spp paths per pixel", metavar="SECONDS",
     )  # fmt: skip
     photons_per_pass: int | None = _option(
         None,

@@ -162,10 +162,10 @@ def test_adaptive_extra_paths_are_spent_and_reproducible(glass) -> None:
 
 
 def test_passes_of_whole_pixels_double_up_to_the_paths_asked_for(diffuse) -> None:
-    # Without mirrors or glass a pass takes whole pixels: 1, 1, 2, 4, 8 paths per pixel, then
-    # what is left of --spp (4): six passes, 20 paths per pixel.
+    # Without mirrors or glass a pass takes whole pixels: 1, 1, 2, 2, 4, 4 paths per pixel,
+    # then what is left of --spp (6): seven passes, 20 paths per pixel.
     result = render(diffuse, options(spp=20, seed=3))
-    assert result.stats["passes"] == 6 and result.stats["spp"] == 20
+    assert result.stats["passes"] == 7 and result.stats["spp"] == 20
     assert result.stats["samples"] == 20 * 24 * 16
     with_glass = render(diffuse, options(spp=20, seed=3, component="caustic"))
     assert with_glass.stats["passes"] == 20  # no paths: one sample per pass
@@ -180,6 +180,30 @@ def test_a_budgeted_render_of_whole_pixels_is_reproduced_by_its_paths(diffuse, m
     again = render(diffuse, options(spp=timed.stats["spp"], seed=4))
     assert again.stats["passes"] == timed.stats["passes"]
     np.testing.assert_array_equal(timed.image, again.image)
+
+
+def test_each_half_of_whole_pixel_passes_runs_on_through_its_own_sequence(
+    diffuse, monkeypatch
+) -> None:
+    # A half's passes take consecutive points of its pixels' stratified sequences: pass j
+    # starts where the half's earlier passes ended (no point used twice), under the half's
+    # own sequence seed.
+    calls = []
+
+    def spy(scene, bvh, camera, spp, seed, sequence=None):
+        calls.append((spp, sequence))
+        return trace_pixel_sums(scene, bvh, camera, spp, seed, sequence)
+
+    monkeypatch.setattr(auto, "trace_pixel_sums", spy)
+    render(diffuse, options(spp=20, seed=3))
+    passes = calls[-7:]  # (the first call loads the kernels on a 2 × 2 image)
+    assert [k for k, _ in passes] == [1, 1, 2, 2, 4, 4, 6]
+    for half in (0, 1):
+        mine = passes[half::2]
+        starts = [first for _, (_, first) in mine]
+        assert starts == list(np.cumsum([0] + [k for k, _ in mine[:-1]]))
+        assert len({qseed for _, (qseed, _) in mine}) == 1
+    assert passes[0][1][0] != passes[1][1][0]
 
 
 def test_whole_pixel_sums_are_those_of_the_same_paths_listed(diffuse) -> None:

@@ -127,7 +127,7 @@ for path, share in ((sys.argv[1], None), (sys.argv[1], 2.0), (sys.argv[2], None)
     kw = dict(width=16, height=16, progress=False)
     assert render(scene, RenderOptions(time=1e-6, **kw)).stats["passes"] == 1
     before = signatures()
-    n = auto.ADAPT_AFTER + 2
+    n = 2 * auto.ADAPT_AFTER  # paths per pixel: whole-pixel passes adapt once each half has 4
     result = render(scene, RenderOptions(spp=n, photons=n * 1024, **kw))
     assert result.stats["extra_paths"] > 0
     new = signatures() - before

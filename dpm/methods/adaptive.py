@@ -26,8 +26,8 @@ import numpy as np
 
 from dpm.density.base import luminance
 
-ADAPT_AFTER = 8  # paths per pixel before the first extra paths (a deviation needs a few)
-EXTRA_PER_PIXEL = 0.25  # extra paths per pass, at most, per pixel of the image
+ADAPT_AFTER = 8  # paths per pixel (half in each half) before the first extra paths
+EXTRA_PER_PIXEL = 0.25  # extra paths per pass, at most, per pixel and path per pixel
 EXTRA_CAP = 64  # extra paths one pixel gets in one pass, at most
 SMOOTH = 5  # pixels across the neighbourhood whose variance a pixel's may take
 

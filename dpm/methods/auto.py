@@ -105,10 +105,11 @@ SEEN_ERROR = 0.6  # relative standard error of a pixel's light seen below which 
 # spread over the smallest window, of SPREAD_WINDOWS, whose sparse pixels hold that many.
 SPARSE_PHOTONS, SPREAD_WINDOWS = 1.0 / SEEN_ERROR**2, (3, 5, 9, 17, 33)
 # Camera paths a pass of whole pixels (a scene without mirrors or glass) holds at most. Passes
-# there start at one path per pixel and double to this: a pixel's paths traced one after
-# another share their first rays' cache lines (from 1 to 4-8 paths per pixel per kernel call,
-# samples/s rose 1.15-1.35x at 64²-512² on the controls), and each pass spends some
-# milliseconds in NumPy between kernels (adaptive sampling's plan, the halves' sums).
+# there start at one path per pixel and double, pair by pair, to this: a pixel's paths traced
+# one after another share their first rays' cache lines (from 1 to 8 paths per pixel per
+# kernel call, samples/s rose 1.17x at 128² and 1.32x at 256² on the Cornell box), and each
+# pass spends some milliseconds in NumPy between kernels (adaptive sampling's plan, the
+# halves' sums). 8 paths per pixel at 128², 1 from 512² (where a pass is long already).
 PASS_SAMPLES = 1 << 17
 MIN_CAUSTIC_SHARE = 1e-3  # caustics under this share of the first pass's light are left out
 # Seconds kept for what follows the last pass (denoising, writing): a fixed part and per pixel,
@@ -406,11 +407,13 @@ class Passes:
         self.points = self.grid = None
         self.footprint = None  # (P,) pixel width at each pixel's first visible point
         total = o.spp if self.deadline is None else None
-        self.bar = tqdm(total=total, unit="pass", disable=not o.progress, desc=method.name)
+        self.bar = tqdm(total=total, unit="spp", disable=not o.progress, desc=method.name)
         self.j = 0  # passes done
         self.spp = 0  # camera paths per pixel done (one per pass, or `pass_paths`)
         self.half_spp = [0, 0]  # of which in each half (passes alternate between them)
         self.k = 1  # camera paths per pixel of the coming pass
+        self.cut = False  # whether the last pass took fewer than planned (the budget's end)
+        self.adapted = False  # whether the last pass spent adaptive samples
         self.begun = time.monotonic()
         method.setup_seconds = self.begun - started  # of the budget, gone before the first pass
 
@@ -424,7 +427,8 @@ class Passes:
                 warm_first_kernels(self.scene, self.bvh, self.camera)
             self.begun = time.monotonic()
         self.camera_samples()
-        if self.full and self.spp >= ADAPT_AFTER:
+        self.adapted = self.adapts()
+        if self.adapted:
             self.adaptive_samples()
         if self.j == 0:
             once = time.monotonic()
@@ -447,11 +451,16 @@ class Passes:
 
     def pass_paths(self) -> int:
         """Camera paths per pixel the next pass is planned to take: one, or where passes take
-        whole pixels (no caustic estimate, no light seen apart), as many as done so far (so
-        they double), up to PASS_SAMPLES in all."""
+        whole pixels (no caustic estimate, no light seen apart), 1, 1, 2, 2, 4, 4, ... (both
+        passes of a pair alike, so the halves stay equal), up to PASS_SAMPLES in all."""
         if self.separate or self.plan is None or self.plan.caustics != "off" or not self.full:
             return 1
-        return int(min(max(1, self.spp), max(1, PASS_SAMPLES // self.pixels)))
+        return int(min(1 << min(self.j // 2, 30), max(1, PASS_SAMPLES // self.pixels)))
+
+    def adapts(self) -> bool:
+        """Whether the coming pass spends adaptive samples: once each half has ADAPT_AFTER / 2
+        paths per pixel (a deviation needs a few; with one path a pass, from pass 8)."""
+        return self.full and 2 * min(self.half_spp) >= ADAPT_AFTER
 
     def camera_samples(self) -> None:
         """The pass's camera samples per pixel (`k`: one where the light seen or caustics are
@@ -582,10 +591,16 @@ class Passes:
         if self.deadline is None:
             self.k = min(k, self.o.spp - self.spp)
             return self.spp >= self.o.spp
+        if self.cut:  # a pass cut to the budget is the last (so --spp of the paths reproduces it)
+            return True
         # a pass's seconds taken as its paths' share plus one path's worth (what it spends
-        # besides): at one path per pass, the next pass fits where the last one would
-        per_path = last / (self.k + 1)
+        # besides): at one path per pass, the next pass fits where the last one would; the
+        # first pass with adaptive samples also pays for those
+        per_path = max(last, 1e-9) / (self.k + 1)
+        if self.adapts() and not self.adapted:
+            per_path *= 1 + EXTRA_PER_PIXEL
         self.k = min(k, int((self.deadline - self.finish_seconds - now) / per_path) - 1)
+        self.cut = self.k < k
         return self.k < 1
 
     def finish(self) -> np.ndarray:
@@ -636,8 +651,8 @@ class Passes:
         PASS_THROUGH of the noise variance the second half removes, against the plain mean's
         (the halves' difference / 4). Where the paths' noise is already low the denoiser's
         blur costs more than it removes (the Cornell box from 64 passes, the light's edge)."""
-        if self.separate or self.spp < ADAPT_AFTER:  # (no mirror or glass: no photons either)
-            return True  # (below ADAPT_AFTER passes a half's few samples guide it poorly)
+        if self.separate or 2 * min(self.half_spp) < ADAPT_AFTER:  # (no photons either)
+            return True  # (below ADAPT_AFTER / 2 paths a half's few samples guide it poorly)
         with self.watch("denoise"):
             halves = [self.paths.half(k).mean().reshape(self.h, self.w, 3) for k in (0, 1)]
             spread = float(np.mean((halves[0] - halves[1]) ** 2))  # var A + var B, per value

@@ -64,8 +64,8 @@ def _entries(position, radius, side, mask):
         _, _, _, cx, cy, cz = ball_cells(
             position[i, 0], position[i, 1], position[i, 2], radius[i], side
         )
-        first[i + 1] = first[i] + cx * cy * cz
-    cells = np.empty(first[n], np.int64)  # each cell's bucket, −1 where the ball has it already
+        first[i + 1] = first[i] + max(cx, 0) * max(cy, 0) * max(cz, 0)
+    cells = np.empty(first[n], np.int32)  # each cell's bucket, −1 where the ball has it already
     start = np.zeros(mask + 2, np.int64)
     for i in range(n):
         x0, y0, z0, cx, cy, cz = ball_cells(
