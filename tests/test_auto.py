@@ -132,24 +132,18 @@ def test_a_budgeted_render_is_reproduced_by_its_pass_count(glass, monkeypatch) -
     assert not np.array_equal(timed.image, other.image)
 
 
-def test_same_seed_same_image_whatever_the_thread_count(glass) -> None:
+@pytest.mark.parametrize(
+    ("scene", "spp"),
+    [("glass", 3), ("diffuse", 24)],  # diffuse: passes of whole pixels, several paths each
+)
+def test_same_seed_same_image_whatever_the_thread_count(scene, spp, request) -> None:
     import numba
 
+    scene = request.getfixturevalue(scene)
     images = []
     for threads in (1, numba.config.NUMBA_NUM_THREADS):
         numba.set_num_threads(threads)
-        images.append(render(glass, options(spp=3, seed=2)).image)
-    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
-    np.testing.assert_array_equal(*images)
-
-
-def test_passes_of_whole_pixels_give_the_same_image_whatever_the_thread_count(diffuse) -> None:
-    import numba
-
-    images = []
-    for threads in (1, numba.config.NUMBA_NUM_THREADS):
-        numba.set_num_threads(threads)
-        images.append(render(diffuse, options(spp=24, seed=2)).image)
+        images.append(render(scene, options(spp=spp, seed=2)).image)
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
     np.testing.assert_array_equal(*images)
 
