@@ -136,8 +136,10 @@ def warn_overrun(stats: dict, budget: float | None) -> None:
     """One line on stderr when the first pass alone overran the --time budget (the image is
     then that one pass, and the render took longer than asked)."""
     if stats.get("overran"):
-        print(f"dpm-render: warning: the first pass took {stats['pass_seconds']:.2f} s and the"
-              f" budget was {budget:g} s (counted from the process start: "
+        compiled = stats.get("compile_seconds", 0.0)
+        also = f" and compiling kernels {compiled:.1f} s" if compiled > 0 else ""
+        print(f"dpm-render: warning: the first pass took {stats['pass_seconds']:.2f} s{also} and"
+              f" the budget was {budget:g} s (counted from the process start: "
               f"{stats['setup_seconds']:.2f} s had gone before the first pass): the image is one"
               " pass", file=sys.stderr)  # fmt: skip
 

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numba as nb
 
 from dpm import compiling, load_file
@@ -32,3 +35,22 @@ def test_a_warm_render_compiles_nothing(scene_path) -> None:
     render(scene, options)  # compiles, or loads from Numba's cache
     stats = render(scene, options).stats
     assert stats["compiled_kernels"] == 0 and stats["compile_seconds"] == 0
+
+
+def test_the_tracer_starts_without_scipy_linalg_or_cffi() -> None:
+    """Numba's first use in a fresh process loads neither (`dpm.tracer._lean_numba`), and
+    both still import afterwards."""
+    code = (
+        "import sys, numpy as np\n"
+        "from dpm.tracer import build_bvh, intersect\n"
+        "tri = np.array([[[0, 0, 1], [1, 0, 1], [0, 1, 1]]], np.float32)\n"
+        "bvh = build_bvh(tri)\n"
+        "o, d = np.zeros((1, 3), np.float32), np.array([[0.2, 0.2, 1]], np.float32)\n"
+        "t, hit = intersect(bvh, o, d / np.linalg.norm(d))\n"
+        "assert hit[0] == 0, hit\n"
+        "print(sorted(m for m in ('scipy.linalg', 'cffi') if m in sys.modules))\n"
+        "import scipy.linalg, cffi\n"
+        "print(cffi.FFI() is not None, scipy.linalg.cython_blas.__name__)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split("\n")[:2] == ["[]", "True scipy.linalg.cython_blas"], out.stderr
