@@ -14,7 +14,7 @@ from dpm import load_scene
 from dpm.data import builder
 from dpm.tracer import build_bvh, trace_pixels
 from dpm.tracer.lights import sample_light_stratified
-from dpm.tracer.sampling import pixel_sequence, stratified2
+from dpm.tracer.sampling import pixel_sequence, stratified2, turn
 
 RHO, LE, SIDE, HEIGHT = 0.5, 10.0, 0.4, 0.5  # floor albedo, light radiance, side, height
 
@@ -123,3 +123,20 @@ def floor_under_light(out: Path) -> Path:
     scene.add("floor", "floor", builder.floor_rect(-2, 2, -2, 2))
     scene.add("light", "light", builder.light_quad((1.0, HEIGHT, 0.0), (1.0, 0.0, 0.0), SIDE))
     return builder.write_scene(scene, out)
+
+
+@nb.njit(cache=False)
+def _turns(u):
+    """(N, 2) `turn` of each u."""
+    out = np.empty((len(u), 2))
+    for i in range(len(u)):
+        out[i, 0], out[i, 1] = turn(u[i])
+    return out
+
+
+def test_turn_is_cos_and_sin_of_a_full_turn() -> None:
+    edges = np.array([0.0, 0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875, 1.0 - 2.0**-53])
+    u = np.concatenate([np.random.default_rng(3).random(100_000), edges, np.nextafter(edges, 0)])
+    got = _turns(u)
+    want = np.stack([np.cos(2 * np.pi * u), np.sin(2 * np.pi * u)], axis=1)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-10)

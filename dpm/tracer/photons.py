@@ -25,7 +25,7 @@ from dpm.scene import DIFFUSE, Scene
 from dpm.tracer.bsdf import scatter_specular, specular_survival
 from dpm.tracer.bvh import BVH
 from dpm.tracer.lights import sample_light_point
-from dpm.tracer.sampling import orthonormal_basis, sample_cosine, uniform
+from dpm.tracer.sampling import orthonormal_basis, sample_cosine, turn, uniform
 from dpm.tracer.surface import albedo_at, next_surface
 from dpm.tracer.traverse import new_stack, spawn_offset
 from dpm.tracer.visible import RR_SPECULAR
@@ -114,8 +114,8 @@ def sample_emission(sc, lt, ox, oy, oz, guide, u1, u2):
     cos_t = 1.0 - u1 * one_minus
     sin_t = math.sqrt(max(0.0, 1.0 - cos_t * cos_t))
     ux, uy, uz, vx, vy, vz = orthonormal_basis(wx, wy, wz)
-    phi = 2.0 * np.pi * u2
-    x, y = sin_t * math.cos(phi), sin_t * math.sin(phi)
+    c, s = turn(u2)
+    x, y = sin_t * c, sin_t * s
     dx = x * ux + y * vx + cos_t * wx
     dy = x * uy + y * vy + cos_t * wy
     dz = x * uz + y * vz + cos_t * wz

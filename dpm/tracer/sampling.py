@@ -69,12 +69,31 @@ def orthonormal_basis(nx, ny, nz):
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
+def turn(u):
+    """(cos 2πu, sin 2πu) for u in [0, 1), within 1e-11 of libm's, without its call (libm's
+    sincos was 4-8 % of a path tracer's time: one per bounce). u is reduced to the nearest
+    quarter turn k/4 and a remainder of at most an eighth of a turn, whose angle a (|a| ≤ π/4)
+    takes the Taylor series to a^11 (sin) and a^12 (cos); then k quarter turns rotate it."""
+    k = math.floor(4.0 * u + 0.5)
+    a = (2.0 * math.pi) * (u - 0.25 * k)
+    a2 = a * a
+    s = a * (1.0 + a2 * (-1 / 6 + a2 * (1 / 120 + a2 * (-1 / 5040 + a2 * (
+        1 / 362880 + a2 * (-1 / 39916800))))))  # fmt: skip
+    c = 1.0 + a2 * (-0.5 + a2 * (1 / 24 + a2 * (-1 / 720 + a2 * (1 / 40320 + a2 * (
+        -1 / 3628800 + a2 * (1 / 479001600))))))  # fmt: skip
+    q = np.int64(k) & 3
+    cos = c if q == 0 else (-s if q == 1 else (-c if q == 2 else s))
+    sin = s if q == 0 else (c if q == 1 else (-s if q == 2 else -c))
+    return cos, sin
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
 def sample_cosine(nx, ny, nz, u1, u2):
     """A unit direction about unit normal n with density cosθ/π (solid angle)."""
     tx, ty, tz, bx, by, bz = orthonormal_basis(nx, ny, nz)
     r = math.sqrt(u1)
-    phi = 2.0 * math.pi * u2
-    x, y = r * math.cos(phi), r * math.sin(phi)
+    c, s = turn(u2)
+    x, y = r * c, r * s
     z = math.sqrt(max(0.0, 1.0 - u1))
     return (
         x * tx + y * bx + z * nx,
