@@ -1,6 +1,7 @@
 """The default render against Mitsuba 3 `path` at equal whole-process wall time, unseen scenes.
 
     python benchmarks/equal_time_unseen.py [SCENE ...] [--times T ...]
+    python benchmarks/equal_time_unseen.py --set examples [SCENE ...] [--times T ...]
 
 On the unseen-scene set (`benchmarks/scenes/make_unseen.py`; default: all of it, the two
 diffuse controls included), at the resolution W x H of each scene's Mitsuba 3 reference
@@ -33,6 +34,14 @@ diffuse controls included), at the resolution W x H of each scene's Mitsuba 3 re
 Writes a JSON record per scene to results/equal_time_unseen/NAME.json (a rerun of some scenes
 rebuilds the table from all records), results/equal_time_unseen.md, and per scene
 results/equal_time_unseen/NAME.png (dpm | Mitsuba's best | reference, at the budget nearest 4 s).
+
+`--set examples` runs the same protocol on the example scenes (the ones the constants were
+chosen on), EXAMPLE_WIDTH pixels wide, scored against `benchmarks/hybrid.py`'s references
+(pt-nocaustic plus the PPM caustic reference, cached in results/equal_time/; their noise is
+known in luminance only, so no noise-corrected column), into results/equal_time_examples.md
+and results/equal_time_examples/: the two sets' figures from one protocol, so the gap between
+them is the scenes', not the method's. (`benchmarks/equal_time.py` is the older protocol:
+Mitsuba's spp fitted to dpm's time, one sampler.)
 """
 
 from __future__ import annotations
@@ -51,19 +60,23 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 from equal_time import MITSUBA_PRELUDE, dpm_run, mitsuba_setup
+from hybrid import reference, reference_noise
 
 sys.path.insert(0, str(Path(__file__).parent / "scenes"))
 from make_unseen import CONTROLS, UNSEEN, unit_scale, unseen_scenes  # noqa: E402
 from unseen_references import OUT as REFERENCES  # noqa: E402
 from unseen_references import mitsuba_variant  # noqa: E402
 
-from common import RESULTS, cpu, markdown_table, passes_text, save_records  # noqa: E402
+from common import RESULTS, SCENES, cpu, markdown_table, passes_text, save_records  # noqa: E402
 from dpm import load_scene  # noqa: E402
 from dpm.io import linear_to_srgb8, read_exr  # noqa: E402
+from dpm.methods.auto import has_specular  # noqa: E402
 from dpm.metrics import rmse  # noqa: E402
 
 OUT = RESULTS / "equal_time_unseen"
 TABLE = RESULTS / "equal_time_unseen.md"
+EXAMPLES = ("cornell_box", "dragon", "glass_egg", "pool1", "pool2", "red_wine", "ring", "torus")
+EXAMPLE_WIDTH = 128  # as benchmarks/equal_time.py, whose references are reused
 TIMES = (2.0, 4.0, 8.0, 16.0)
 MAX_WIDTH = 256  # the references' width: min(camera width, MAX_WIDTH)
 BATCH_SPP = 16  # Mitsuba samples per pixel per render call
@@ -180,13 +193,27 @@ def run_scene(
     """Both renderers at each budget on scene `name` (Mitsuba with each sampler); errors,
     seconds, spp and load. A row's flat Mitsuba fields are its first sampler's; the others'
     are under "mitsuba_<sampler>"."""
-    path = {p.stem: p for p in unseen_scenes()}[name]
-    scene = load_scene(path)
-    width, height, ref_path, own_path = scoring_reference(name, scene.camera.width)
-    camera = scene.camera.with_resolution(width, height)
-    ref = read_exr(ref_path)
-    own = None if own_path is None else read_exr(own_path)
-    noise = json.loads(ref_path.with_suffix(".json").read_text())
+    if name in EXAMPLES:
+        path = SCENES / f"{name}.obj"
+        scene = load_scene(path)
+        width = EXAMPLE_WIDTH
+        height = width * scene.camera.height // scene.camera.width
+        camera = scene.camera.with_resolution(width, height)
+        ref, own, own_path = reference(scene, camera, name), None, None
+        ref_path = Path(f"{name}-{width}x{height}-reference.exr")
+        parts = reference_noise(name, camera) or {}
+        luminance = float(np.hypot(parts.get("path_noise", np.nan), parts.get("caustic_noise", 0)))
+        noise = {"noise_rgb": None, "noise_luminance": luminance, "spp_per_half": None}
+        control = not has_specular(scene)
+    else:
+        path = {p.stem: p for p in unseen_scenes()}[name]
+        scene = load_scene(path)
+        width, height, ref_path, own_path = scoring_reference(name, scene.camera.width)
+        camera = scene.camera.with_resolution(width, height)
+        ref = read_exr(ref_path)
+        own = None if own_path is None else read_exr(own_path)
+        noise = json.loads(ref_path.with_suffix(".json").read_text())
+        control = name in CONTROLS
     load_start = load()
     print(f"{name} {width}x{height}: load average {load_start}", flush=True)
     rows, images = [], []
@@ -242,9 +269,9 @@ def run_scene(
     pick = int(np.argmin([abs(b - PICTURE_BUDGET) for b in times]))
     gap = np.ones((height, 4, 3), np.float32)
     strip = np.concatenate([images[pick][0], gap, images[pick][1], gap, ref], axis=1)
-    iio.imwrite(OUT / f"{name}.png", linear_to_srgb8(strip))
+    iio.imwrite(out_folder(name) / f"{name}.png", linear_to_srgb8(strip))
     return {
-        "scene": name, "control": name in CONTROLS, "size": f"{width}x{height}",
+        "scene": name, "control": control, "size": f"{width}x{height}",
         "reference": ref_path.name, "own_reference": None if own_path is None else own_path.name,
         "reference_noise_rgb": noise["noise_rgb"],
         "reference_noise_luminance": noise["noise_luminance"],
@@ -253,6 +280,11 @@ def run_scene(
         "batch_spp": batch_spp, "picture_budget": times[pick], "load_start": load_start,
         "load_end": load_end, "cpu": cpu(), "date": str(datetime.date.today()), "rows": rows,
     }  # fmt: skip
+
+
+def out_folder(name: str) -> Path:
+    """Where scene `name`'s record and picture go: its set's folder."""
+    return RESULTS / "equal_time_examples" if name in EXAMPLES else OUT
 
 
 def mitsuba_best(row: dict, own: str = "") -> float:
@@ -277,14 +309,18 @@ def own_error(rmse_value: float, noise: float) -> float:
 
 def corrected_ratio(record: dict, row: dict, ours: str, theirs: str) -> float:
     """Ratio of the two sides' own errors (`own_error`, the record's reference noise); NaN
-    where either side is below the reference's noise."""
+    where either side is below the reference's noise, or the noise is not known in RGB."""
     noise = record["reference_noise_rgb"]
+    if noise is None:
+        return float("nan")
     return own_error(row[ours], noise) / own_error(row[theirs], noise)
 
 
 def corrected_summary(records: list[dict], ours: str = "dpm_rmse", theirs: str = "best") -> str:
     """One line: the geometric mean of the noise-corrected ratios over the rows where both
     sides' errors exceed the reference's noise, and how many rows could not be told."""
+    if any(r["reference_noise_rgb"] is None for r in records):
+        return "not made: the references' noise is known in luminance only."
     ratios = []
     for r in records:
         for x in r["rows"]:
@@ -349,7 +385,8 @@ def independent(records: list[dict]) -> list[dict]:
 
 def report(records: list[dict]) -> str:
     """The Markdown report: a table per group (caustic scenes, controls) and their summaries."""
-    order = {name: i for i, name in enumerate(UNSEEN)}
+    examples = bool(records) and records[0]["scene"] in EXAMPLES
+    order = {name: i for i, name in enumerate(EXAMPLES if examples else UNSEEN)}
     records = sorted(records, key=lambda r: order.get(r["scene"], len(order)))
     head = ["scene", "W x H", "budget s", "dpm wall s", "passes", "dpm RMSE", "Mitsuba spp",
             "Mitsuba wall s", "Mitsuba plain RMSE", "Mitsuba OIDN RMSE",
@@ -357,6 +394,8 @@ def report(records: list[dict]) -> str:
             "noise-corrected"]  # fmt: skip
 
     def corrected(r: dict, x: dict) -> str:
+        if r["reference_noise_rgb"] is None:
+            return "–"
         q = corrected_ratio(r, {**x, "best": mitsuba_best(x)}, "dpm_rmse", "best")
         return f"{q:.2f}" if np.isfinite(q) else "below noise"
 
@@ -383,21 +422,39 @@ def report(records: list[dict]) -> str:
     dates = sorted({r["date"] for r in records})
     variants = sorted({r["variant"] for r in records})
     batches = ", ".join(str(b) for b in sorted({r["batch_spp"] for r in records}))
+
+    def noise_text(r: dict) -> str:
+        if r["reference_noise_rgb"] is None:  # an example's reference (benchmarks/hybrid.py)
+            return f"reference noise {r['reference_noise_luminance']:.4f} luminance"
+        return (f"reference noise {r['reference_noise_rgb']:.4f} RGB, "
+                f"{r['reference_noise_luminance']:.4f} luminance "
+                f"(2 x {r['reference_spp_per_half']} spp)")  # fmt: skip
+
     per_scene = [
-        f"- {r['scene']} ({r['size']}): reference noise {r['reference_noise_rgb']:.4f} RGB, "
-        f"{r['reference_noise_luminance']:.4f} luminance (2 x {r['reference_spp_per_half']} "
-        f"spp); load average {r['load_start']} at the start, {r['load_end']} at the end; "
-        f"plan at {r['rows'][-1]['budget']:g} s: {r['rows'][-1]['plan']}"
+        f"- {r['scene']} ({r['size']}): {noise_text(r)}; load average {r['load_start']} at the "
+        f"start, {r['load_end']} at the end; plan at {r['rows'][-1]['budget']:g} s: "
+        f"{r['rows'][-1]['plan']}"
         for r in records
     ]
+    scored = (
+        ["(`benchmarks/hybrid.py`: pt-nocaustic plus the PPM caustic reference, noise in",
+         "luminance only); Mitsuba's score is the best of its plain mean and its OIDN image",
+         "over its"]
+        if examples else
+        ["(two halves, spp per scene below; a scaled copy against its scale-1 twin's, see the",
+         "end); Mitsuba's score is the best of its plain mean and its OIDN image over its"]
+    )  # fmt: skip
     lines = [
-        "# Default render vs Mitsuba 3 path (+ OIDN) at equal wall time, unseen scenes",
+        "# Default render vs Mitsuba 3 path (+ OIDN) at equal wall time, "
+        + ("the examples (tuned on)" if examples else "unseen scenes"),
         "",
-        "Made by `python benchmarks/equal_time_unseen.py` (see its docstring): whole-process",
+        "Made by `python benchmarks/equal_time_unseen.py"
+        + (" --set examples" if examples else "")
+        + "` (see its docstring): whole-process",
         "wall time from launch to exit, both warm; Mitsuba time-boxed to dpm's measured wall",
-        f"time, in batches of {batches} spp; RMSE against the scene's Mitsuba 3 reference",
-        "(two halves, spp per scene below; a scaled copy against its scale-1 twin's, see the",
-        "end); Mitsuba's score is the best of its plain mean and its OIDN image over its",
+        f"time, in batches of {batches} spp; RMSE against the scene's "
+        + ("reference" if examples else "Mitsuba 3 reference"),
+        *scored,
         "samplers (Mitsuba columns: `independent`, its default; multijitter columns: its",
         "`multijitter` sampler, time-boxed the same; a record from before shows `–`).",
         f"Machine: {'; '.join(machines)}; Mitsuba {', '.join(variants)}; {', '.join(dates)}.",
@@ -436,7 +493,7 @@ def report(records: list[dict]) -> str:
         "",
         *scaled_copies(records),
         *[f"![{r['scene']}: dpm, Mitsuba 3 best, reference at {r['picture_budget']:g} s]"
-          f"(equal_time_unseen/{r['scene']}.png)" for r in records],
+          f"({out_folder(r['scene']).name}/{r['scene']}.png)" for r in records],
     ]  # fmt: skip
     return "\n".join(lines) + "\n"
 
@@ -445,20 +502,25 @@ def main() -> None:
     """Run the comparison on the unseen scenes named (default: all) and rebuild the report."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("scenes", nargs="*", help=f"scenes (default: all): {', '.join(UNSEEN)}")
+    p.add_argument("--set", choices=("unseen", "examples"), default="unseen",
+                   help=f"the scene set (examples: {', '.join(EXAMPLES)})")  # fmt: skip
     p.add_argument("--times", type=float, nargs="+", default=list(TIMES))
     p.add_argument("--batch-spp", type=int, default=BATCH_SPP, help="Mitsuba spp per batch")
     p.add_argument("--samplers", nargs="+", default=list(SAMPLERS), help="Mitsuba's samplers")
     args = p.parse_args()
-    unknown = set(args.scenes) - set(UNSEEN)
+    known = EXAMPLES if args.set == "examples" else UNSEEN
+    unknown = set(args.scenes) - set(known)
     if unknown:
         p.error(f"unknown scene(s) {sorted(unknown)}")
     variant, env = mitsuba_variant(None)
     if "DRJIT_LIBLLVM_PATH" in env:  # the Mitsuba children inherit it
         os.environ["DRJIT_LIBLLVM_PATH"] = env["DRJIT_LIBLLVM_PATH"]
-    OUT.mkdir(parents=True, exist_ok=True)
-    names = args.scenes or list(UNSEEN)
+    names = args.scenes or list(known)
+    folder = out_folder(names[0])
+    folder.mkdir(parents=True, exist_ok=True)
+    table = RESULTS / f"{folder.name}.md"
     run = lambda n: run_scene(n, args.times, variant, args.batch_spp, tuple(args.samplers))  # noqa: E731
-    save_records(OUT, names, run, report, TABLE)
+    save_records(folder, names, run, report, table)
 
 
 if __name__ == "__main__":

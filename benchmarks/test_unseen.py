@@ -39,3 +39,23 @@ def test_the_scaled_copies_render_as_their_twin() -> None:
         same = np.isclose(images[name], twin, rtol=1e-3, atol=1e-4).all(axis=2).mean()
         assert same > 0.9, (name, same)
         assert abs(images[name].mean() / twin.mean() - 1) < 0.05, name
+
+
+def test_the_examples_report_names_its_set_and_corrects_no_noise() -> None:
+    """`equal_time_unseen.py --set examples`: the examples' references know their noise in
+    luminance only, so their table has no noise-corrected ratio, and says which set it is."""
+    import equal_time_unseen as e
+
+    row = {"budget": 2.0, "dpm_s": 2.0, "passes": 4, "spp": 4, "plan": "p", "dpm_rmse": 0.1,
+           "mitsuba_s": 2.0, "mitsuba_spp": 16, "mitsuba_plain_rmse": 0.4,
+           "mitsuba_oidn_rmse": 0.2, "ratio": 0.5}  # fmt: skip
+    record = {"scene": "glass_egg", "control": False, "size": "128x128", "variant": "v",
+              "reference_noise_rgb": None, "reference_noise_luminance": 0.01,
+              "reference_spp_per_half": None, "batch_spp": 16, "picture_budget": 2.0,
+              "load_start": [0, 0, 0], "load_end": [0, 0, 0], "cpu": "c", "date": "d",
+              "rows": [row]}  # fmt: skip
+    text = e.report([record])
+    assert "the examples (tuned on)" in text and "--set examples" in text
+    assert "geometric mean of dpm / Mitsuba best 0.50" in text
+    assert "not made: the references' noise is known in luminance only" in text
+    assert "(equal_time_examples/glass_egg.png)" in text
