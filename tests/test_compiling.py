@@ -38,10 +38,12 @@ def test_a_warm_render_compiles_nothing(scene_path) -> None:
 
 
 def test_the_tracer_starts_without_scipy_linalg_or_cffi() -> None:
-    """Numba's first use in a fresh process loads neither (`dpm.tracer._lean_numba`), and
-    both still import afterwards."""
+    """After `load_registries_lean` (what `dpm-render` does first), Numba's first use in a
+    fresh process loads neither scipy.linalg nor cffi, and both still import afterwards."""
     code = (
         "import sys, numpy as np\n"
+        "from dpm.tracer._lean_numba import load_registries_lean\n"
+        "load_registries_lean()\n"
         "from dpm.tracer import build_bvh, intersect\n"
         "tri = np.array([[[0, 0, 1], [1, 0, 1], [0, 1, 1]]], np.float32)\n"
         "bvh = build_bvh(tri)\n"

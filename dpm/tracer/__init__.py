@@ -5,10 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from dpm.scene import Scene
-from dpm.tracer import (
-    _cache,  # noqa: F401  (first: drops stale compiled kernels)
-    _lean_numba,  # noqa: F401  (before any kernel runs)
-)
+from dpm.tracer import _cache  # noqa: F401  (first: drops stale compiled kernels)
 from dpm.tracer.bvh import BVH, BVHArrays, build_bvh_from_triangles
 from dpm.tracer.path import shade, trace_listed, trace_pixel_sums, trace_pixels
 from dpm.tracer.photons import PhotonMap, trace_photons

@@ -6,10 +6,12 @@ to see whether BLAS is there (for `np.dot` and `np.linalg` in kernels, which dpm
 use), and `numba.core.typing.cffi_utils` builds a `cffi.FFI()` (cffi is installed for
 pyoidn), which parses C with pycparser. Together they were about 0.17 s of a 2-s render's
 start on the 2-core host (0.83 → 0.66 s to a first BVH, mean of eight processes each).
-Importing those two Numba modules here, with the two optional imports made to fail, leaves
-Numba without BLAS and cffi support, which no dpm kernel needs; the imports themselves are
-restored at once, so scipy.linalg and cffi import as usual afterwards (pyoidn, scipy.spatial).
-Where they were imported already, nothing is blocked.
+`load_registries_lean` imports those two Numba modules with the two optional imports made to
+fail, which leaves Numba without BLAS and cffi support for the rest of the process; the
+imports themselves are restored at once, so scipy.linalg and cffi import as usual afterwards
+(pyoidn, scipy.spatial). Where they were imported already, nothing is blocked. Only the
+`dpm-render` console script calls it, first thing: its process runs no other code, whereas a
+program that imports dpm may compile its own kernels with `np.dot`.
 """
 
 from __future__ import annotations
@@ -31,6 +33,3 @@ def load_registries_lean() -> None:
         for name in blocked:
             if sys.modules.get(name, 0) is None:
                 del sys.modules[name]
-
-
-load_registries_lean()
