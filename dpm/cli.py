@@ -137,11 +137,11 @@ def warn_overrun(stats: dict, budget: float | None) -> None:
     then that one pass, and the render took longer than asked)."""
     if stats.get("overran"):
         compiled = stats.get("compile_seconds", 0.0)
-        also = f" and compiling kernels {compiled:.1f} s" if compiled > 0 else ""
-        print(f"dpm-render: warning: the first pass took {stats['pass_seconds']:.2f} s{also} and"
-              f" the budget was {budget:g} s (counted from the process start: "
-              f"{stats['setup_seconds']:.2f} s had gone before the first pass): the image is one"
-              " pass", file=sys.stderr)  # fmt: skip
+        also = f"; compiling kernels took {compiled:.1f} s in all" if compiled > 0 else ""
+        print(f"dpm-render: warning: the first pass took {stats['pass_seconds']:.2f} s and the"
+              f" budget was {budget:g} s (counted from the process start: "
+              f"{stats['setup_seconds']:.2f} s had gone before the first pass{also}): the image"
+              " is one pass", file=sys.stderr)  # fmt: skip
 
 
 def check_writable(path: Path) -> None:

@@ -56,3 +56,19 @@ def test_the_tracer_starts_without_scipy_linalg_or_cffi() -> None:
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split("\n")[:2] == ["[]", "True scipy.linalg.cython_blas"], out.stderr
+
+
+def test_the_render_script_starts_numba_lean() -> None:
+    """`dpm-render`'s console script loads Numba's array-math registry the lean way before
+    anything else (`render_main` stood in for: it would render)."""
+    code = (
+        "import sys, dpm.cli as cli\n"
+        "def main():\n"
+        "    from numba.np import arraymath\n"
+        "    print('cffi' in sys.modules, 'scipy.linalg' in sys.modules, arraymath._HAVE_BLAS)\n"
+        "    return 0\n"
+        "cli.render_main = main\n"
+        "cli.render_command()\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False False False", out.stdout + out.stderr

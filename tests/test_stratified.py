@@ -139,4 +139,4 @@ def test_turn_is_cos_and_sin_of_a_full_turn() -> None:
     u = np.concatenate([np.random.default_rng(3).random(100_000), edges, np.nextafter(edges, 0)])
     got = _turns(u)
     want = np.stack([np.cos(2 * np.pi * u), np.sin(2 * np.pi * u)], axis=1)
-    np.testing.assert_allclose(got, want, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-11)

@@ -7,11 +7,12 @@ use), and `numba.core.typing.cffi_utils` builds a `cffi.FFI()` (cffi is installe
 pyoidn), which parses C with pycparser. Together they were about 0.17 s of a 2-s render's
 start on the 2-core host (0.83 → 0.66 s to a first BVH, mean of eight processes each).
 `load_registries_lean` imports those two Numba modules with the two optional imports made to
-fail, which leaves Numba without BLAS and cffi support for the rest of the process; the
-imports themselves are restored at once, so scipy.linalg and cffi import as usual afterwards
-(pyoidn, scipy.spatial). Where they were imported already, nothing is blocked. Only the
-`dpm-render` console script calls it, first thing: its process runs no other code, whereas a
-program that imports dpm may compile its own kernels with `np.dot`.
+fail; the imports themselves are restored at once, so scipy.linalg and cffi import as usual
+afterwards (pyoidn, scipy.spatial). What stays for the rest of the process: Numba's
+`_HAVE_BLAS` flag reads False (`np.convolve` and `np.correlate` in kernels take a plain loop;
+`np.dot` and `np.linalg` still find BLAS when first compiled) and kernels cannot call cffi
+functions. Where the two were imported already, nothing is blocked. Only the `dpm-render`
+console script calls it, first thing: its process runs no other code.
 """
 
 from __future__ import annotations
