@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from dpm import clock  # noqa: F401  (first of dpm: it notes when dpm was imported)
 from dpm.camera import Camera
 from dpm.errors import InputError
 from dpm.options import sidecar_types

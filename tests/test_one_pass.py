@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dpm import load_scene
+from dpm import clock, load_scene
 from dpm.cli import render_main
 from dpm.denoise import restore_certain
 from dpm.io import tone_map
@@ -112,7 +112,7 @@ def test_a_budget_the_first_pass_overran_is_reported(tmp_path: Path, capsys) -> 
 NO_NEW_KERNELS = """
 import sys
 from numba.core.dispatcher import Dispatcher
-from dpm import load_scene
+from dpm import clock, load_scene
 from dpm.methods import auto
 from dpm.renderer import RenderOptions, render
 
@@ -138,3 +138,16 @@ for path, share in ((sys.argv[1], None), (sys.argv[1], 2.0), (sys.argv[2], None)
 def test_no_kernel_compiles_after_the_first_pass() -> None:
     diffuse = EGG.parent / "cornell_box.obj"
     subprocess.run([sys.executable, "-c", NO_NEW_KERNELS, str(EGG), str(diffuse)], check=True)
+
+
+def test_a_budget_counts_from_the_process_not_from_a_shell_that_exec_d_it() -> None:
+    """/proc's start time is the fork's: a process a shell exec'd after other work keeps
+    the shell's. `process_started` believes at most BEFORE_IMPORT seconds before dpm's import."""
+    age = "import time; from dpm.clock import process_started as p; print(time.monotonic() - p())"
+    ages = []
+    for before in ("", "sleep 3; "):
+        command = f'{before}exec "{sys.executable}" -c "{age}"'
+        out = subprocess.run(["bash", "-c", command], capture_output=True, text=True, check=True)
+        ages.append(float(out.stdout))
+    assert 0 < ages[0] < clock.BEFORE_IMPORT  # the interpreter's start and dpm's import
+    assert clock.BEFORE_IMPORT <= ages[1] < 3.0  # not the shell's 3 s of sleep before
