@@ -60,7 +60,7 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 from equal_time import MITSUBA_PRELUDE, dpm_run, mitsuba_setup
-from hybrid import reference, reference_noise
+from hybrid import reference, reference_noise, reference_path
 
 sys.path.insert(0, str(Path(__file__).parent / "scenes"))
 from make_unseen import CONTROLS, UNSEEN, unit_scale, unseen_scenes  # noqa: E402
@@ -200,7 +200,7 @@ def run_scene(
         height = width * scene.camera.height // scene.camera.width
         camera = scene.camera.with_resolution(width, height)
         ref, own, own_path = reference(scene, camera, name), None, None
-        ref_path = Path(f"{name}-{width}x{height}-reference.exr")
+        ref_path = reference_path(name, camera)
         parts = reference_noise(name, camera) or {}
         luminance = float(np.hypot(parts.get("path_noise", np.nan), parts.get("caustic_noise", 0)))
         noise = {"noise_rgb": None, "noise_luminance": luminance, "spp_per_half": None}
