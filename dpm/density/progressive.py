@@ -55,7 +55,7 @@ def estimate_in_passes(
         index = PointIndex(points.position[hit], points.normal[hit])
         passes = photons.split(estimator.photons_per_pass)
         radius = estimator.initial_radius(index, footprint(points, hit), passes[0])
-        state = estimator.start(len(hit), radius)
+        state = estimator.state(len(hit), radius)
         for part in passes:
             state.add(index, part, watch)
         out[hit] = reflected(points.albedo[hit], state.irradiance())
@@ -148,8 +148,8 @@ def run_passes(
     state = None  # started at the first pass, whose photons may set the radii
     key = fingerprint(estimator, scene, points, seed, guided)
     if checkpoint is not None and checkpoint.exists():
-        empty = estimator.start(0, 1.0)  # only its class, to read the statistics into
-        state = type(empty).from_arrays(_load(checkpoint, key))
+        empty = estimator.state(0, 1.0)  # only its kind, to read the statistics into
+        state = empty.from_arrays(_load(checkpoint, key))
     per_pass = estimator.photons_per_pass
     n_passes = -(-n_paths // per_pass)
     last = n_passes if stop_after is None else min(n_passes, stop_after)
@@ -166,14 +166,14 @@ def run_passes(
             with watch("estimate"):
                 if state is None:
                     radius = estimator.initial_radius(index, footprint(points, hit), photons)
-                    state = estimator.start(len(hit), radius)
+                    state = estimator.state(len(hit), radius)
                 state.add(index, photons, watch)
             bar.update(1)
             if checkpoint is not None and time.monotonic() - saved > CHECKPOINT_SECONDS:
                 _save(checkpoint, key, state.arrays())
                 saved = time.monotonic()
     if state is None:  # no pass run: nothing gathered, at any radius
-        state = estimator.start(len(hit), estimator.radius or 1.0)
+        state = estimator.state(len(hit), estimator.radius or 1.0)
     if checkpoint is not None:
         _save(checkpoint, key, state.arrays())
     out = np.zeros((len(points), 3), np.float32)

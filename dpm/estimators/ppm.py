@@ -9,11 +9,12 @@ slices of one photon stream, so a run can stop after any pass and resume bit-ide
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
 from dpm.density.gather import Photons, PointIndex, Watch
+from dpm.density.held_out import HeldOutState
 from dpm.density.progressive import ALPHA, Statistics, estimate_in_passes
 from dpm.density.radius import initial_radii
 from dpm.errors import InputError
@@ -102,6 +103,14 @@ class Progressive:
         if self.radius is not None:
             return self.radius
         return initial_radii(index.position, index.normal, footprint, first, self.scale)
+
+    def state(self, n: int, radius: Radius) -> Any:
+        """The run's state for n points at initial radius `radius`: the method's own (`start`)
+        when a radius was given, else its held-out choice among scales of `radius`
+        (`dpm.density.held_out`)."""
+        if self.radius is None:
+            return HeldOutState(self.start, n, radius)
+        return self.start(n, radius)
 
     def estimate(self, points: VisiblePoints, photons: Photons, watch: Watch = None) -> np.ndarray:
         """(N, 3) float32 caustic radiance leaving each visible point, passes of the map;

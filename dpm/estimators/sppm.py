@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import partial
 from typing import ClassVar
 
 import numpy as np
@@ -18,6 +19,7 @@ from tqdm import tqdm
 
 from dpm.camera import Camera
 from dpm.density.gather import PointIndex
+from dpm.density.held_out import HeldOutState
 from dpm.density.progressive import pass_seed
 from dpm.density.radius import initial_radii
 from dpm.estimators.ppm import ALPHA, PPM, PPMState, check_progressive
@@ -90,7 +92,10 @@ def sppm_caustics_at_radii(
     if stream is not None and stream.n_paths != n_paths:
         raise ValueError(f"the stream holds {stream.n_paths} paths, not {n_paths}")
     watch = watch or Stopwatch()
-    states = [PPMState.start(camera.width * camera.height, r or 1.0, alpha) for r in radii]
+    pixels = camera.width * camera.height
+    states = [PPMState.start(pixels, r or 1.0, alpha) for r in radii]
+    # a default (None) radius: the held-out choice among scales of each pixel's own
+    held_out: dict[int, HeldOutState] = {}
     n_passes = -(-n_paths // photons_per_pass)
     passes = None if stream is None else stream.split(photons_per_pass)
     for j in tqdm(range(n_passes), unit="pass", disable=not progress, desc="sppm"):
@@ -109,15 +114,21 @@ def sppm_caustics_at_radii(
         if j == 0 and None in radii:
             with watch("estimate"):
                 own = pixel_radii(points, photons)
-            for state, radius in zip(states, radii, strict=True):
-                if radius is None:
-                    state.radius = own.copy()
-        sppm_gather(states, points, photons, watch)
+            start = partial(PPMState.start, alpha=alpha)
+            held_out = {
+                i: HeldOutState(start, pixels, own) for i, r in enumerate(radii) if r is None
+            }
+        plain = [s for i, s in enumerate(states) if i not in held_out]
+        if plain:
+            sppm_gather(plain, points, photons, watch)
+        for state in held_out.values():  # each half gathers with its own paths' photons
+            state.add_pass(lambda h, run, part, p=points: sppm_gather(run, p, part, watch), photons)
     # already weighted by throughput · ρ/π: radiance
     images = [
-        s.irradiance().reshape(camera.height, camera.width, 3).astype(np.float32) for s in states
+        held_out.get(i, s).irradiance().reshape(camera.height, camera.width, 3).astype(np.float32)
+        for i, s in enumerate(states)
     ]
-    return images, states[0].photons
+    return images, (held_out.get(0) or states[0]).photons
 
 
 def pixel_radii(points: VisiblePoints, photons: PhotonMap) -> np.ndarray:

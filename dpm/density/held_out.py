@@ -1,0 +1,144 @@
+"""Choosing a progressive estimator's radius scale by held-out error, when none is given.
+
+The best initial radius differs between scenes of the same photon density by 20×: it follows
+how fast the caustic varies, which no first pass measures well (three attempts, documented in
+docs/benchmarks.md, moved the view-relative rule and broke as many scenes as they mended). The
+whole run measures it: every pass's photon paths are dealt into two halves by the parity of
+their path number, and each half runs the estimator from its own states at a ladder of
+scales of the view-relative initial radius (`dpm.density.radius`). With A_s and B_s the two
+halves' irradiance at scale s, and s₀ the narrowest (little blur, much noise),
+    Σ_points (A_s − B_s₀)² + (B_s − A_s₀)²
+is, in expectation, twice each half's squared error at s plus a constant: the halves are
+independent, so the narrow estimate's noise adds the same amount at every s, and only its
+small blur is shared. The run keeps the scale one step narrower than the minimum (a half has
+half the photons, and the best radius of the whole is narrower) and returns the mean of the
+two halves there. Wide scales cost the most (pairs grow with the disc's area), so after each
+pass the steps more than KEEP wider than the current minimum are dropped; the minimum moves
+narrower as photons arrive, never wider. Consistent: each half is the method's own
+consistent estimator at a fixed scale, so is their mean at any scale chosen.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import fields, replace
+from typing import Any
+
+import numpy as np
+
+from dpm.density.base import luminance
+from dpm.density.gather import PointIndex
+from dpm.stopwatch import Stopwatch
+from dpm.tracer import PhotonMap
+
+# Scales of the view-relative initial radius, steps of √2 from ½ to 4√2. Chosen on the
+# examples with the rule below (benchmarks/radius_defaults.py): the narrowest as the held-out
+# reference (¼ and ⅜ of it scored 1.04 and 1.00 against 0.98 for ½, geometric mean of
+# default / own best, ppm at M), one step narrower than the minimum (the minimum itself: 1.05).
+LADDER = 2.0 ** (np.arange(-2, 6) / 2)
+NARROWER = 1  # steps narrower than the held-out minimum that the run keeps
+KEEP = 2  # steps wider than the current minimum still run after a pass
+HALVES = 2
+
+
+def half(photons: PhotonMap, h: int) -> PhotonMap:
+    """The photons of the paths numbered h modulo 2 in one pass, as a map of those paths
+    (flux divided by their count)."""
+    n = (photons.n_paths + 1 - h) // 2
+    mask = photons.path % 2 == h
+    scale = np.float32(photons.n_paths / max(n, 1))
+    part = photons.select(mask)
+    return replace(part, flux=part.flux * scale, path=part.path // 2, n_paths=n)
+
+
+class HeldOutState:
+    """A progressive run at a ladder of radius scales in two halves of the photon paths, with
+    the held-out choice of scale; the interface of a progressive state (`add`, `irradiance`,
+    counters, `arrays` / `from_arrays` for checkpoints)."""
+
+    def __init__(self, start: Any, n: int, radius: float | np.ndarray) -> None:
+        self.start = start  # (n, radius) -> the method's own state
+        self.radius = np.broadcast_to(np.asarray(radius, np.float64), (n,)).copy()
+        self.runs = [[start(n, s * self.radius) for s in LADDER] for _ in range(HALVES)]
+        self.live = len(LADDER)  # steps 0 … live − 1 still run
+        self.indexes: list[PointIndex] = []  # one per half and step: its own grids
+
+    @property
+    def paths(self) -> int:
+        """Emitted photon paths so far (both halves)."""
+        return sum(run[0].paths for run in self.runs)
+
+    @property
+    def passes(self) -> int:
+        """Passes run."""
+        return self.runs[0][0].passes
+
+    @property
+    def photons(self) -> int:
+        """Caustic photons stored so far (both halves)."""
+        return sum(run[0].photons for run in self.runs)
+
+    def add(self, index: PointIndex, photons: PhotonMap, watch: Stopwatch | None = None) -> None:
+        """Gather one pass into every live step of both halves (each step searching its own
+        grids), then drop the wide steps far from the current minimum."""
+        if not self.indexes:
+            count = HALVES * len(LADDER)
+            self.indexes = [PointIndex(index.position, index.normal) for _ in range(count)]
+
+        def gather(h: int, states: list[Any], part: PhotonMap) -> None:
+            for j, state in enumerate(states):
+                state.add(self.indexes[h * len(LADDER) + j], part, watch)
+
+        self.add_pass(gather, photons)
+
+    def add_pass(
+        self, gather: Callable[[int, list[Any], PhotonMap], None], photons: PhotonMap
+    ) -> None:
+        """One pass: `gather(h, states, part)` brings half h's photons `part` into its live
+        steps' states; then the wide steps far from the current minimum are dropped."""
+        for h, run in enumerate(self.runs):
+            gather(h, run[: self.live], half(photons, h))
+        self.live = min(self.live, self.best() + 1 + KEEP)
+
+    def scores(self) -> np.ndarray:
+        """(live,) held-out score of each live step: Σ (A_s − B_s₀)² + (B_s − A_s₀)² over the
+        points, luminance of irradiance."""
+        a = [luminance(s.irradiance()) for s in self.runs[0][: self.live]]
+        b = [luminance(s.irradiance()) for s in self.runs[1][: self.live]]
+        return np.array([np.sum((a[j] - b[0]) ** 2 + (b[j] - a[0]) ** 2) for j in range(len(a))])
+
+    def best(self) -> int:
+        """The live step of least held-out score."""
+        return int(np.argmin(self.scores()))
+
+    def chosen(self) -> int:
+        """The step the run keeps: NARROWER steps narrower than the minimum."""
+        return max(self.best() - NARROWER, 0)
+
+    def scale(self) -> float:
+        """The chosen multiple of the view-relative initial radius."""
+        return float(LADDER[self.chosen()])
+
+    def irradiance(self) -> np.ndarray:
+        """(n, 3) float64 caustic irradiance: the two halves' mean at the chosen step (W m⁻²)."""
+        j = self.chosen()
+        return sum(run[j].irradiance() for run in self.runs) / HALVES
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Everything needed to resume: each live run's arrays, prefixed 'h.j.'."""
+        out = {"radius": self.radius, "live": np.asarray(self.live)}
+        for h, run in enumerate(self.runs):
+            for j in range(self.live):
+                out |= {f"{h}.{j}.{k}": v for k, v in run[j].arrays().items()}
+        return out
+
+    def from_arrays(self, a: dict[str, np.ndarray]) -> HeldOutState:
+        """The state `arrays` saved, its runs of the same class as this one's."""
+        out = HeldOutState(self.start, len(a["radius"]), a["radius"])
+        out.live = int(a["live"])
+        kind = type(self.runs[0][0])
+        names = [f.name for f in fields(kind)]
+        for h, run in enumerate(out.runs):
+            for j in range(out.live):
+                run[j] = kind.from_arrays({k: a[f"{h}.{j}.{k}"] for k in names})
+        return out
