@@ -14,7 +14,7 @@ small blur is shared. The run keeps the scale one step narrower than the minimum
 half the photons, and the best radius of the whole is narrower) and returns the mean of the
 two halves there. Wide scales cost the most (pairs grow with the disc's area), so after each
 pass the steps more than KEEP wider than the current minimum are dropped; the minimum moves
-narrower as photons arrive, never wider. Consistent: each half is the method's own
+narrower as photons arrive. Consistent: each half is the method's own
 consistent estimator at a fixed scale, so is their mean at any scale chosen.
 """
 
@@ -27,14 +27,15 @@ from typing import Any
 import numpy as np
 
 from dpm.density.base import luminance
-from dpm.density.gather import PointIndex
+from dpm.density.gather import GATHER, Pairs, PointIndex
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap
 
-# Scales of the view-relative initial radius, steps of √2 from ½ to 4√2. Chosen on the
-# examples with the rule below (benchmarks/radius_defaults.py): the narrowest as the held-out
-# reference (¼ and ⅜ of it scored 1.04 and 1.00 against 0.98 for ½, geometric mean of
-# default / own best, ppm at M), one step narrower than the minimum (the minimum itself: 1.05).
+# Scales of the view-relative initial radius, steps of √2 from ½ to 4√2, and the rule below,
+# chosen on the examples at M and 10·M (benchmarks/radius_defaults.py; geometric mean of
+# default / own best over 14 rows, ppm and cppm): the narrowest as the held-out reference and
+# one step narrower than the minimum, 1.040 and 1.021; the minimum itself 1.076 and 1.077; a
+# fixed-radius reference (α = 1) at ½ or ⅜ instead 1.04-1.11.
 LADDER = 2.0 ** (np.arange(-2, 6) / 2)
 NARROWER = 1  # steps narrower than the held-out minimum that the run keeps
 KEEP = 2  # steps wider than the current minimum still run after a pass
@@ -51,17 +52,40 @@ def half(photons: PhotonMap, h: int) -> PhotonMap:
     return replace(part, flux=part.flux * scale, path=part.path // 2, n_paths=n)
 
 
+class Found:
+    """The pairs of one search at the widest radii of a pass, answering the narrower steps'
+    searches by filtering them (the part of a `PointIndex` a progressive state reads)."""
+
+    def __init__(self, index: PointIndex, pairs: Pairs) -> None:
+        self.position, self.normal, self.pairs = index.position, index.normal, pairs
+
+    def within(
+        self, photons: PhotonMap, radius: np.ndarray | float, watch: Stopwatch | None = None
+    ) -> Pairs:
+        """The pairs closer than radius ((N,) per point or one value) of the point, from
+        those found (the same photons: `photons` is the searched pass)."""
+        with (watch or Stopwatch())(GATHER):
+            p = self.pairs
+            keep = (
+                p.distance
+                < np.broadcast_to(np.asarray(radius, np.float64), (len(self.position),))[p.point]
+            )
+            return Pairs(p.point[keep], p.photon[keep], p.distance[keep])
+
+
 class HeldOutState:
     """A progressive run at a ladder of radius scales in two halves of the photon paths, with
     the held-out choice of scale; the interface of a progressive state (`add`, `irradiance`,
     counters, `arrays` / `from_arrays` for checkpoints)."""
 
-    def __init__(self, start: Any, n: int, radius: float | np.ndarray) -> None:
-        self.start = start  # (n, radius) -> the method's own state
+    def __init__(
+        self, start: Callable[[int, np.ndarray], Any], n: int, radius: float | np.ndarray
+    ) -> None:
+        self.start = start  # (n, (n,) radii) -> the method's own state
         self.radius = np.broadcast_to(np.asarray(radius, np.float64), (n,)).copy()
         self.runs = [[start(n, s * self.radius) for s in LADDER] for _ in range(HALVES)]
         self.live = len(LADDER)  # steps 0 … live − 1 still run
-        self.indexes: list[PointIndex] = []  # one per half and step: its own grids
+        self.indexes: list[PointIndex] = []  # one per half: its grids at the widest radii
 
     @property
     def paths(self) -> int:
@@ -79,15 +103,17 @@ class HeldOutState:
         return sum(run[0].photons for run in self.runs)
 
     def add(self, index: PointIndex, photons: PhotonMap, watch: Stopwatch | None = None) -> None:
-        """Gather one pass into every live step of both halves (each step searching its own
-        grids), then drop the wide steps far from the current minimum."""
+        """Gather one pass into every live step of both halves (one search per half, at the
+        widest radius, filtered for the narrower steps), then drop the wide steps far from
+        the current minimum."""
         if not self.indexes:
-            count = HALVES * len(LADDER)
-            self.indexes = [PointIndex(index.position, index.normal) for _ in range(count)]
+            self.indexes = [PointIndex(index.position, index.normal) for _ in range(HALVES)]
 
         def gather(h: int, states: list[Any], part: PhotonMap) -> None:
-            for j, state in enumerate(states):
-                state.add(self.indexes[h * len(LADDER) + j], part, watch)
+            reach = np.max([state.reach for state in states], axis=0)
+            found = Found(self.indexes[h], self.indexes[h].within(part, reach, watch))
+            for state in states:
+                state.add(found, part, watch)
 
         self.add_pass(gather, photons)
 

@@ -10,7 +10,9 @@ with r_k its NEAREST-th photon in the first pass (inf where there are fewer: the
 denser caustic or a finer image gets a smaller disc, and nothing reads the scene's bounding
 box: geometry out of view changes no radius. Points not seen through a camera (no
 footprint) take r_k itself. Constants chosen on the example scenes
-(`benchmarks/radius_defaults.py`), reported on the unseen scenes too.
+(`benchmarks/radius_defaults.py`), reported on the unseen scenes too. A method given no radius
+runs a ladder of scales of this start and keeps one by held-out error
+(`dpm.density.held_out`).
 """
 
 from __future__ import annotations

@@ -51,6 +51,11 @@ class APPMState(Statistics):
         pilot = start_radius(n, radius)
         return cls(pilot, np.zeros((n, 3)), np.zeros(n), np.zeros(n), alpha=alpha)
 
+    @property
+    def reach(self) -> np.ndarray:
+        """(n,) float64 radius within which the next pass is gathered: the pilot (scene units)."""
+        return self.pilot
+
     def bandwidth(self, paths: int) -> np.ndarray:
         """(n,) float64 bandwidth each point uses for a pass that brings the total to paths."""
         h = self.pilot

@@ -74,6 +74,11 @@ class PPMState(Statistics):
         self.tau = (self.tau + phi) * ratio[:, None]
         self.count = grown
 
+    @property
+    def reach(self) -> np.ndarray:
+        """(n,) float64 radius within which the next pass is gathered (scene units)."""
+        return self.radius
+
     def irradiance(self) -> np.ndarray:
         """(n, 3) float64 caustic irradiance E = τ / (π R² paths) (W m⁻²)."""
         return self.tau / (np.pi * self.radius[:, None] ** 2 * max(self.paths, 1))

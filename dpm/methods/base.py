@@ -17,6 +17,7 @@ import numpy as np
 
 from dpm.camera import Camera
 from dpm.density.gather import PhotonIndex
+from dpm.density.held_out import HeldOutState
 from dpm.density.progressive import run_passes
 from dpm.errors import InputError
 from dpm.estimators.pm import check_k
@@ -201,11 +202,16 @@ class Progressive(PhotonMethod):
             checkpoint=o.checkpoint, progress=o.progress, watch=watch,
         )  # fmt: skip
         self.caustic_photons = state.photons
+        # without --radius: the multiple of the view-relative radius the held-out test chose
+        self.radius_scale = state.scale() if isinstance(state, HeldOutState) else None
         return caustic
 
     def stats(self) -> dict[str, Any]:
-        """PhotonMethod's stats, the initial radius and the paths per pass."""
+        """PhotonMethod's stats, the initial radius (or the scale chosen without one) and the
+        paths per pass."""
         extra = {"radius": self.est.radius, "photons_per_pass": self.est.photons_per_pass}
+        if getattr(self, "radius_scale", None) is not None:
+            extra["radius_scale"] = self.radius_scale
         return {**super().stats(), **extra}
 
 
