@@ -252,7 +252,10 @@ def test_ppm_error_against_a_ten_times_longer_run_falls_with_the_budget(egg) -> 
     assert errors[0] > errors[1] > errors[2] > 0, errors
 
 
-@pytest.mark.parametrize("cls,radius", [(PPM, 0.05), (APPM, 0.05), (CPPM, 0.05), (PPM, None)])
+@pytest.mark.parametrize(
+    "cls,radius",
+    [(PPM, 0.05), (APPM, 0.05), (CPPM, 0.05), (PPM, None), (APPM, None), (CPPM, None)],
+)
 def test_a_resumed_run_ends_bit_identical(cls, radius, egg, tmp_path: Path) -> None:
     scene, bvh, points = egg
     estimator = cls(radius=radius, photons_per_pass=50_000)  # None: the held-out choice

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 import pytest
 from test_density import (
@@ -15,7 +18,7 @@ from test_density import (
 from dpm.density.base import luminance
 from dpm.density.gather import PointIndex
 from dpm.density.held_out import LADDER, NARROWER, HeldOutState, half
-from dpm.estimators import PPM
+from dpm.estimators import APPM, PPM
 from dpm.estimators.cppm import CPPM
 from dpm.metrics import rmse
 from dpm.tracer import PhotonMap, VisiblePoints
@@ -36,7 +39,13 @@ def stripes(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.where((x * 10).astype(int) % 2 == 0, 1.8, 0.2) + 0 * y
 
 
-def run(state, photons: PhotonMap, points: VisiblePoints, per_pass: int, truth=plane_density):
+def run(
+    state: Any,
+    photons: PhotonMap,
+    points: VisiblePoints,
+    per_pass: int,
+    truth: Callable[[np.ndarray, np.ndarray], np.ndarray] = plane_density,
+) -> tuple[Any, float]:
     """The state after the passes of `photons`, and its error relative to the truth's mean."""
     index = PointIndex(points.position, points.normal)
     for part in photons.split(per_pass):
@@ -86,6 +95,23 @@ def test_a_default_run_converges() -> None:
     ]
     assert errors[0] > errors[1] > errors[2], errors
     assert errors[2] < 0.05, errors
+
+
+@pytest.mark.parametrize("cls", [PPM, APPM])
+@pytest.mark.parametrize("per_pass", [1, 399])
+def test_one_path_passes_deal_the_halves_evenly_and_stay_finite(cls, per_pass: int) -> None:
+    # Paths are dealt by their number in the run: one-path passes (and a last pass of one
+    # path) alternate between the halves, and neither half divides by zero paths.
+    points, photons = plane_points(8), plane_photons(400, seed=4)
+    est = cls(photons_per_pass=per_pass)
+    index = PointIndex(points.position, points.normal)
+    state = est.state(len(points), est.initial_radius(index, None, photons.split(per_pass)[0]))
+    for part in photons.split(per_pass):
+        state.add(index, part)
+    assert [run[0].paths for run in state.runs] == [200, 200]
+    assert state.passes == -(-400 // per_pass)
+    irradiance = state.irradiance()
+    assert np.isfinite(irradiance).all() and irradiance.mean() > 0
 
 
 def test_a_given_radius_runs_the_method_alone() -> None:

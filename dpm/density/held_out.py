@@ -28,6 +28,7 @@ import numpy as np
 
 from dpm.density.base import luminance
 from dpm.density.gather import GATHER, Pairs, PointIndex
+from dpm.errors import InputError
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap
 
@@ -42,11 +43,12 @@ KEEP = 2  # steps wider than the current minimum still run after a pass
 HALVES = 2
 
 
-def half(photons: PhotonMap, h: int) -> PhotonMap:
-    """The photons of the paths numbered h modulo 2 in one pass, as a map of those paths
-    (flux divided by their count)."""
-    n = (photons.n_paths + 1 - h) // 2
-    mask = photons.path % 2 == h
+def half(photons: PhotonMap, h: int, first: int = 0) -> PhotonMap:
+    """Half h of a pass whose paths are numbered from `first` in the run: the photons of the
+    paths numbered h modulo 2, as a map of those paths (flux per path of its own count)."""
+    parity = (h - first) % 2  # the pass's own path numbers in half h
+    n = (photons.n_paths + 1 - parity) // 2
+    mask = photons.path % 2 == parity
     scale = np.float32(photons.n_paths / max(n, 1))
     part = photons.select(mask)
     return replace(part, flux=part.flux * scale, path=part.path // 2, n_paths=n)
@@ -57,6 +59,7 @@ class Found:
     searches by filtering them (the part of a `PointIndex` a progressive state reads)."""
 
     def __init__(self, index: PointIndex, pairs: Pairs) -> None:
+        """The pairs `pairs` found by `index` (whose points and normals it passes on)."""
         self.position, self.normal, self.pairs = index.position, index.normal, pairs
 
     def within(
@@ -81,21 +84,19 @@ class HeldOutState:
     def __init__(
         self, start: Callable[[int, np.ndarray], Any], n: int, radius: float | np.ndarray
     ) -> None:
+        """n points' runs from `start` at each scale of the initial radii `radius` (one, or
+        (n,) per point, scene units), in both halves, nothing gathered."""
         self.start = start  # (n, (n,) radii) -> the method's own state
         self.radius = np.broadcast_to(np.asarray(radius, np.float64), (n,)).copy()
         self.runs = [[start(n, s * self.radius) for s in LADDER] for _ in range(HALVES)]
         self.live = len(LADDER)  # steps 0 … live − 1 still run
+        self.passes = 0  # passes run (a half may get no path of a one-path pass)
         self.indexes: list[PointIndex] = []  # one per half: its grids at the widest radii
 
     @property
     def paths(self) -> int:
-        """Emitted photon paths so far (both halves)."""
+        """Emitted photon paths so far (both halves): the next pass's first path number."""
         return sum(run[0].paths for run in self.runs)
-
-    @property
-    def passes(self) -> int:
-        """Passes run."""
-        return self.runs[0][0].passes
 
     @property
     def photons(self) -> int:
@@ -122,8 +123,12 @@ class HeldOutState:
     ) -> None:
         """One pass: `gather(h, states, part)` brings half h's photons `part` into its live
         steps' states; then the wide steps far from the current minimum are dropped."""
+        first = self.paths  # paths are dealt by their number in the run, not in the pass
         for h, run in enumerate(self.runs):
-            gather(h, run[: self.live], half(photons, h))
+            part = half(photons, h, first)
+            if part.n_paths:  # a one-path pass has nothing for one half
+                gather(h, run[: self.live], part)
+        self.passes += 1
         self.live = min(self.live, self.best() + 1 + KEEP)
 
     def scores(self) -> np.ndarray:
@@ -146,13 +151,16 @@ class HeldOutState:
         return float(LADDER[self.chosen()])
 
     def irradiance(self) -> np.ndarray:
-        """(n, 3) float64 caustic irradiance: the two halves' mean at the chosen step (W m⁻²)."""
+        """(n, 3) float64 caustic irradiance: the two halves' mean at the chosen step, each
+        weighted by its paths (W m⁻²)."""
         j = self.chosen()
-        return sum(run[j].irradiance() for run in self.runs) / HALVES
+        total = sum(run[j].paths * run[j].irradiance() for run in self.runs)
+        return total / max(self.paths, 1)
 
     def arrays(self) -> dict[str, np.ndarray]:
         """Everything needed to resume: each live run's arrays, prefixed 'h.j.'."""
         out = {"radius": self.radius, "live": np.asarray(self.live)}
+        out["held_out_passes"] = np.asarray(self.passes)
         for h, run in enumerate(self.runs):
             for j in range(self.live):
                 out |= {f"{h}.{j}.{k}": v for k, v in run[j].arrays().items()}
@@ -160,11 +168,14 @@ class HeldOutState:
 
     def from_arrays(self, a: dict[str, np.ndarray]) -> HeldOutState:
         """The state `arrays` saved, its runs of the same class as this one's."""
-        out = HeldOutState(self.start, len(a["radius"]), a["radius"])
-        out.live = int(a["live"])
         kind = type(self.runs[0][0])
         names = [f.name for f in fields(kind)]
-        for h, run in enumerate(out.runs):
-            for j in range(out.live):
-                run[j] = kind.from_arrays({k: a[f"{h}.{j}.{k}"] for k in names})
+        try:
+            out = HeldOutState(self.start, len(a["radius"]), a["radius"])
+            out.live, out.passes = int(a["live"]), int(a["held_out_passes"])
+            for h, run in enumerate(out.runs):
+                for j in range(out.live):
+                    run[j] = kind.from_arrays({k: a[f"{h}.{j}.{k}"] for k in names})
+        except KeyError as exc:
+            raise InputError(f"not a checkpoint of a held-out run (no {exc})") from None
         return out

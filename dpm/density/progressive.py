@@ -1,7 +1,9 @@
 """Running a progressive estimator (PPM, APPM) pass by pass, with checkpoints.
 
-A progressive estimator has `start(n) -> state`, `check()` and `photons_per_pass`; its state
-has `add(index, pass_photons, watch)`, `irradiance()` and, from `Statistics`, `arrays()` and
+A progressive estimator has `state(n, radius) -> state` (its own `start(n, radius)`, or the
+held-out choice of scale without a radius: `dpm.density.held_out`), `check()` and
+`photons_per_pass`; its state has `add(index, pass_photons, watch)`, `irradiance()`, `reach`
+(the radii the next pass is searched within) and, from `Statistics`, `arrays()` and
 `from_arrays()`. Passes are consecutive slices of one photon stream
 (`trace_photons(first_path=…)`), so the statistics after pass j depend only on the seed, and a
 run resumed from a checkpoint ends bit-identical to one that never stopped.
@@ -72,6 +74,8 @@ def fingerprint(
 ) -> str:
     """A hash of everything a checkpoint's statistics depend on except the pass count."""
     h = hashlib.sha256(repr((estimator, seed, guided)).encode())
+    if getattr(estimator, "radius", 0.0) is None:  # a held-out run's statistics differ
+        h.update(b"held-out")
     for a in (scene.triangles, scene.material, points.position, points.normal, points.hit):
         h.update(np.ascontiguousarray(a).tobytes())
     return h.hexdigest()

@@ -84,9 +84,10 @@ def sppm_caustics_at_radii(
 ) -> tuple[list[np.ndarray], int]:
     """`sppm_caustics` from each initial radius of `radii` at once ((H, W, 3) float32 images
     in that order, and the caustic photons): the runs share every pass's camera samples,
-    photons and one photon search. `stream`: the caustic photons of those n_paths paths,
-    traced before (a benchmark sweeping settings over one stream), whose consecutive slices
-    are the passes a run would trace."""
+    photons and one photon search (a default radius, None, runs the held-out choice of
+    scale, `dpm.density.held_out`, whose halves search apart). `stream`: the caustic photons
+    of those n_paths paths, traced before (a benchmark sweeping settings over one stream),
+    whose consecutive slices are the passes a run would trace."""
     for radius in radii:
         check_progressive(radius or 1.0, photons_per_pass, alpha)
     if stream is not None and stream.n_paths != n_paths:
@@ -95,7 +96,7 @@ def sppm_caustics_at_radii(
     pixels = camera.width * camera.height
     states = [PPMState.start(pixels, r or 1.0, alpha) for r in radii]
     # a default (None) radius: the held-out choice among scales of each pixel's own
-    held_out: dict[int, HeldOutState] = {}
+    held_out: HeldOutState | None = None
     n_passes = -(-n_paths // photons_per_pass)
     passes = None if stream is None else stream.split(photons_per_pass)
     for j in tqdm(range(n_passes), unit="pass", disable=not progress, desc="sppm"):
@@ -114,21 +115,23 @@ def sppm_caustics_at_radii(
         if j == 0 and None in radii:
             with watch("estimate"):
                 own = pixel_radii(points, photons)
-            start = partial(PPMState.start, alpha=alpha)
-            held_out = {
-                i: HeldOutState(start, pixels, own) for i, r in enumerate(radii) if r is None
-            }
-        plain = [s for i, s in enumerate(states) if i not in held_out]
+            held_out = HeldOutState(partial(PPMState.start, alpha=alpha), pixels, own)
+        plain = [s for s, r in zip(states, radii, strict=True) if r is not None]
         if plain:
             sppm_gather(plain, points, photons, watch)
-        for state in held_out.values():  # each half gathers with its own paths' photons
-            state.add_pass(lambda h, run, part, p=points: sppm_gather(run, p, part, watch), photons)
+        if held_out is not None:  # each half gathers with its own paths' photons
+            held_out.add_pass(
+                lambda h, run, part, p=points: sppm_gather(run, p, part, watch), photons
+            )
     # already weighted by throughput · ρ/π: radiance
-    images = [
-        held_out.get(i, s).irradiance().reshape(camera.height, camera.width, 3).astype(np.float32)
-        for i, s in enumerate(states)
+    final = [
+        s if r is not None or held_out is None else held_out
+        for s, r in zip(states, radii, strict=True)
     ]
-    return images, (held_out.get(0) or states[0]).photons
+    images = [
+        s.irradiance().reshape(camera.height, camera.width, 3).astype(np.float32) for s in final
+    ]
+    return images, final[0].photons
 
 
 def pixel_radii(points: VisiblePoints, photons: PhotonMap) -> np.ndarray:

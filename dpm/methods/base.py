@@ -203,7 +203,8 @@ class Progressive(PhotonMethod):
         )  # fmt: skip
         self.caustic_photons = state.photons
         # without --radius: the multiple of the view-relative radius the held-out test chose
-        self.radius_scale = state.scale() if isinstance(state, HeldOutState) else None
+        held_out = isinstance(state, HeldOutState) and state.passes > 0
+        self.radius_scale = state.scale() if held_out else None
         return caustic
 
     def stats(self) -> dict[str, Any]:
