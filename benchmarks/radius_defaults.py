@@ -20,7 +20,12 @@ defaults against the best tuned classic.
   --reference-paths guided paths, initial radius REFERENCE_FOOTPRINTS median pixel widths,
   checkpointed under results/references/unseen/), and the 30 settings over radii log-spaced
   from 0.15 to 6 median pixel widths (the bounding box means nothing where a floor is 1000
-  units wide).
+  units wide). A record tuned against another reference (an earlier one, blurrier or with
+  fewer paths) is retuned by walking each (method, passes) column's radii from its earlier
+  best towards lower error (`tune_descending`: the grid's best where the error is unimodal
+  in the radius, as 274 of the 279 columns tuned in full against the 40M-path references
+  were, the other five with a second minimum four or more steps narrower than the best); a
+  budget never tuned walks from its neighbouring budget's bests.
 
 Each scene writes results/radius_defaults/SET/SCENE.json (the unseen references' radiance
 beside it, SCENE.npz, reused by later runs); results/radius_defaults.md is rebuilt from all of them.
@@ -52,7 +57,7 @@ from common import (  # noqa: E402
 )
 from dpm import load_scene  # noqa: E402
 from dpm.estimators.reference import caustic_rmse, ppm_reference  # noqa: E402
-from dpm.estimators.tuning import best, tune_widening  # noqa: E402
+from dpm.estimators.tuning import best, tune_descending, tune_widening  # noqa: E402
 from dpm.io import atomic  # noqa: E402
 from dpm.methods import make_estimator  # noqa: E402
 from dpm.scene import Scene  # noqa: E402
@@ -62,8 +67,11 @@ OUT = RESULTS / "radius_defaults"
 TUNED = ("ppm", "appm", "cppm")
 DEFAULTS = (*TUNED, "nppm")
 MAX_WIDTH = 256
-REFERENCE_FOOTPRINTS = 0.5  # the reference's initial radius, in median pixel widths
-REFERENCE_PATHS = 40_000_000
+# The reference's initial radius, in median pixel widths, and its paths. 0.5 widths (40M
+# paths) blurred the spheres' foci and the far camera's caustic enough to move the best
+# radius at 10·M; 0.2 needs (0.5 / 0.2)² more paths for the same noise.
+REFERENCE_FOOTPRINTS = 0.2
+REFERENCE_PATHS = 250_000_000
 REFERENCE_PATHS_PER_PASS = 1_000_000
 DEFAULT_PASSES = 10
 
@@ -112,21 +120,26 @@ def unseen_reference(
     name: str, scene: Scene, bvh: BVH, points: VisiblePoints, paths: int
 ) -> tuple[np.ndarray, float, int]:
     """(N, 3) reference radiance at the points, its noise and paths: the saved one
-    (OUT/unseen/NAME.npz) when it has at least `paths`, else a new run (resumed from its
-    checkpoints)."""
+    (OUT/unseen/NAME.npz) when it has at least `paths` from REFERENCE_FOOTPRINTS, else a new
+    run (resumed from its checkpoints)."""
     saved = OUT / "unseen" / f"{name}.npz"
     if saved.exists():
         with np.load(saved) as f:
-            if int(f["paths"]) >= paths:
+            footprints = float(f["footprints"]) if "footprints" in f else 0.5
+            if int(f["paths"]) >= paths and footprints == REFERENCE_FOOTPRINTS:
                 return f["radiance"], float(f["noise"]), int(f["paths"])
     width = float(np.median(points.footprint[points.hit]))
     ref = ppm_reference(
         scene, bvh, points, paths, REFERENCE_FOOTPRINTS * width, REFERENCE_PATHS_PER_PASS,
-        seed=1, checkpoint_dir=RESULTS / "references" / "unseen" / name,
+        seed=1, progress=True,
+        checkpoint_dir=RESULTS / "references" / "unseen" / f"{name}-w{REFERENCE_FOOTPRINTS}",
     )  # fmt: skip
     saved.parent.mkdir(parents=True, exist_ok=True)
     with atomic(saved) as tmp, open(tmp, "wb") as f:
-        np.savez_compressed(f, radiance=ref.radiance, noise=ref.noise, paths=ref.n_paths)
+        np.savez_compressed(
+            f, radiance=ref.radiance, noise=ref.noise, paths=ref.n_paths,
+            footprints=REFERENCE_FOOTPRINTS,
+        )  # fmt: skip
     return ref.radiance, ref.noise, ref.n_paths
 
 
@@ -146,7 +159,13 @@ def run_unseen(
     saved = OUT / "unseen" / f"{name}.json"
     rows = {}
     if saved.exists():
-        rows = {row["paths"]: row for row in json.loads(saved.read_text())["budgets"]}
+        earlier = json.loads(saved.read_text())
+        rows = {row["paths"]: row for row in earlier["budgets"]}
+        if earlier["reference"] != reference_record(width, paths):
+            for row in rows.values():  # tuned against another reference: retune from its bests
+                row["start"] = column_bests(row.pop("trials", []), row["paths"])
+                row["best"] = {}
+    grid = width * np.geomspace(0.15, 6.0, 10)
     for n in budgets:
         photons = trace_photons(scene, bvh, n, seed=0, caustic_only=True)
         row = {**rows.get(n, {}), "paths": n, "caustic_photons": len(photons)}
@@ -160,16 +179,39 @@ def run_unseen(
             continue
         row.setdefault("best", {})
         row.setdefault("trials", [])
-        grid = width * np.geomspace(0.15, 6.0, 10)
+        others = [r for r in rows.values() if r is not row and r.get("trials")]
+        if not row.get("start") and not row["trials"] and others:
+            # never tuned, a neighbouring budget was: walk from that budget's bests
+            other = min(others, key=lambda r: abs(np.log(r["paths"] / n)))
+            row["start"] = column_bests(other["trials"], other["paths"])
         for m in TUNED:  # saved after each method: a long run keeps its part, a rerun resumes
             if m in row["best"]:
                 continue
-            trials = tune_widening(points, photons, reference, grid, methods=(m,))
+            start = {(mm, k): r for mm, k, r in row.get("start", []) if mm == m}
+            trials = (
+                tune_descending(points, photons, reference, grid, start) if start
+                else tune_widening(points, photons, reference, grid, methods=(m,))
+            )  # fmt: skip
             row["best"][m] = asdict(best(trials, m))
             row["trials"] += [asdict(t) for t in trials]
             save(OUT / "unseen" / f"{name}.json", unseen_record(name, points, noise, paths, rows))
-            print(name, n, m, row["best"][m]["rmse"], flush=True)
+            print(name, n, m, row["best"][m]["rmse"], f"{len(trials)} trials", flush=True)
     return unseen_record(name, points, noise, paths, rows)
+
+
+def column_bests(trials: list[dict], paths: int) -> list[list]:
+    """[method, passes, radius] of the least-error trial in each (method, passes) column."""
+    out: dict[tuple[str, int], dict] = {}
+    for t in trials:
+        key = (t["method"], round(paths / t["photons_per_pass"]))
+        if key not in out or t["rmse"] < out[key]["rmse"]:
+            out[key] = t
+    return [[m, n, t["radius"]] for (m, n), t in sorted(out.items())]
+
+
+def reference_record(width: float, paths: int) -> dict:
+    """What a record says of the reference it was scored against."""
+    return {"paths": paths, "radius": REFERENCE_FOOTPRINTS * width}
 
 
 def unseen_record(
@@ -178,7 +220,7 @@ def unseen_record(
     """The JSON record of an unseen scene, its rows in budget order."""
     width = float(np.median(points.footprint[points.hit]))
     out = record(name, "unseen", points, noise, [rows[n] for n in sorted(rows)])
-    out["reference"] = {"paths": paths, "radius": REFERENCE_FOOTPRINTS * width}
+    out["reference"] = reference_record(width, paths)
     return out
 
 
@@ -221,7 +263,10 @@ def markdown() -> str:
         "Made by `python benchmarks/radius_defaults.py` (see its docstring). Caustic RMSE at a",
         "method's defaults divided by its own best of 30 settings (10 radii × 10/100/1000",
         "passes, tuned against the reference); nppm's by the best tuned classic. The defaults",
-        "were chosen on the examples; the unseen scenes were never tuned on.",
+        "were chosen on the examples; the unseen scenes were never tuned on. Unseen",
+        f"references: PPM from {REFERENCE_FOOTPRINTS} median pixel widths (the record's",
+        "`reference`); rows tuned against an earlier reference were retuned by walking each",
+        "column of the grid from its earlier best (`tune_descending`).",
     ]
     for set_ in ("examples", "unseen"):
         files = sorted((OUT / set_).glob("*.json"))

@@ -16,7 +16,7 @@ from dpm.estimators import APPM, PM, PPM
 from dpm.estimators.cppm import CPPM
 from dpm.estimators.reference import ppm_reference
 from dpm.estimators.sppm import sppm_caustics
-from dpm.estimators.tuning import best, rescore, tune_widening
+from dpm.estimators.tuning import best, rescore, tune, tune_descending, tune_widening
 from dpm.metrics import rmse
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap, VisiblePoints, build_bvh, trace_photons, trace_visible_points
@@ -341,6 +341,23 @@ def test_tuning_widens_the_radius_grid_until_the_best_is_inside() -> None:
         assert tried[0] < best(trials, method).radius < tried[-1]
     # the kept estimates line up with the trials: rescoring against the same reference is exact
     assert rescore(trials, estimates, points, reference) == trials
+
+
+def test_descending_tuning_finds_the_grids_best_from_either_side() -> None:
+    points, photons = plane_points(8), plane_photons(20_000, 3)
+    exact = plane_density(points.position[:, 0], points.position[:, 1]) / np.pi
+    reference = exact[:, None].repeat(3, 1).astype(np.float32)
+    grid = np.geomspace(0.005, 0.32, 7)
+    full = tune(points, photons, reference, grid, passes=(10,), methods=("ppm",))
+    target = best(full, "ppm").radius
+    assert grid[0] < target < grid[-1]  # inside: the walk needs no step past an edge
+    lengths = []
+    for start in (grid[0], grid[-1]):  # the walk turns towards lower error from either end
+        trials = tune_descending(points, photons, reference, grid, {("ppm", 10): start})
+        assert best(trials, "ppm").radius == pytest.approx(target, rel=1e-9)
+        assert best(trials, "ppm").rmse == pytest.approx(best(full, "ppm").rmse, rel=1e-6)
+        lengths.append(len(trials))
+    assert min(lengths) < len(grid)  # from near the best it runs fewer settings than the grid
 
 
 @numba.njit

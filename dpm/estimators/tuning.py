@@ -102,6 +102,43 @@ def tune_widening(
     return trials
 
 
+def tune_descending(
+    points: VisiblePoints,
+    photons: PhotonMap,
+    reference: np.ndarray,
+    radii: np.ndarray,
+    start: dict[tuple[str, int], float],
+    max_steps: int = 4,
+) -> list[Trial]:
+    """Per (method, passes) in `start`, the log-spaced grid `radii` walked from the radius
+    nearest start[(method, passes)] towards lower error until the error rises (past the grid's
+    edges by up to `max_steps` of its steps, as `tune_widening` goes).
+
+    Where the error is unimodal in the radius this finds `tune_widening`'s best at about a
+    third of its cost; `start` is typically the best found against an earlier reference.
+    """
+    ratio = float(radii[1] / radii[0])
+    lo, hi = -max_steps, len(radii) - 1 + max_steps
+    trials: list[Trial] = []
+    for (method, n), radius in start.items():
+        error: dict[int, float] = {}  # grid index (past the edges too) -> RMSE
+
+        def at(k: int, method=method, n=n, error=error) -> float:
+            """The RMSE at grid index k, run once."""
+            if k not in error:
+                radius_k = np.array([radii[0] * ratio**k])
+                trial = tune(points, photons, reference, radius_k, (n,), (method,))[0]
+                trials.append(trial)
+                error[k] = trial.rmse
+            return error[k]
+
+        k = int(np.clip(round(np.log(radius / radii[0]) / np.log(ratio)), 0, len(radii) - 1))
+        step = 1 if at(k + 1) < at(k) else -1
+        while lo <= k + step <= hi and at(k + step) < at(k):
+            k += step  # both neighbours of the last k are known when this stops
+    return trials
+
+
 def rescore(
     trials: list[Trial], estimates: list[np.ndarray], points: VisiblePoints, reference: np.ndarray
 ) -> list[Trial]:
