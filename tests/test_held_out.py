@@ -17,7 +17,7 @@ from test_density import (
 
 from dpm.density.base import luminance
 from dpm.density.gather import PointIndex
-from dpm.density.held_out import LADDER, NARROWER, HeldOutState, half
+from dpm.density.held_out import KEEP, LADDER, NARROWER, HeldOutState, half
 from dpm.estimators import APPM, PPM
 from dpm.estimators.cppm import CPPM
 from dpm.metrics import rmse
@@ -112,6 +112,19 @@ def test_one_path_passes_deal_the_halves_evenly_and_stay_finite(cls, per_pass: i
     assert state.passes == -(-400 // per_pass)
     irradiance = state.irradiance()
     assert np.isfinite(irradiance).all() and irradiance.mean() > 0
+
+
+@pytest.mark.parametrize("points", [20, 20_000])
+def test_a_wide_step_is_dropped_only_when_clearly_worse(points: int) -> None:
+    # Scores least at step 1 and rising with the scale by 10 % a step: over 20 noisy points
+    # that rise is within the noise (an early pass's few photons), so every step runs on;
+    # over 20,000 the steps past KEEP above the minimum are clearly worse and are dropped.
+    rng = np.random.default_rng(3)
+    factor = np.array([1.3, 1.0, 1.1, 1.2, 1.3, 1.4, 1.5, 1.6])
+    terms = factor[:, None] * rng.exponential(1.0, (len(LADDER), points))
+    state = PPM().state(points, 0.05)
+    state.terms = lambda: terms  # the per-point score terms a pass would have left
+    assert state.still_live() == (len(LADDER) if points == 20 else 1 + 1 + KEEP)
 
 
 def test_a_given_radius_runs_the_method_alone() -> None:

@@ -13,9 +13,11 @@ independent, so the narrow estimate's noise adds the same amount at every s, and
 small blur is shared. The run keeps the scale one step narrower than the minimum (a half has
 half the photons, and the best radius of the whole is narrower) and returns the mean of the
 two halves there. Wide scales cost the most (pairs grow with the disc's area), so after each
-pass the steps more than KEEP wider than the current minimum are dropped; the minimum moves
-narrower as photons arrive. Consistent: each half is the method's own
-consistent estimator at a fixed scale, so is their mean at any scale chosen.
+pass a step more than KEEP wider than the current minimum is dropped, with the steps wider
+still, once its score is clearly above the minimum's (a paired test over the points: early
+passes are noisy); the minimum moves narrower as photons arrive. Consistent: each half is
+the method's own consistent estimator at a fixed scale, so is their mean at any scale
+chosen.
 """
 
 from __future__ import annotations
@@ -39,7 +41,11 @@ from dpm.tracer import PhotonMap
 # fixed-radius reference (α = 1) at ½ or ⅜ instead 1.04-1.11.
 LADDER = 2.0 ** (np.arange(-2, 6) / 2)
 NARROWER = 1  # steps narrower than the held-out minimum that the run keeps
-KEEP = 2  # steps wider than the current minimum still run after a pass
+KEEP = 2  # steps wider than the current minimum that run whatever their score
+# A wider step is dropped only when its score exceeds the minimum's by Z standard errors of
+# the difference (a paired test over the points): early passes have few photons, and a
+# minimum that strays narrow by chance must not drop the steps the run will want later.
+Z = 3.0
 HALVES = 2
 
 
@@ -129,14 +135,29 @@ class HeldOutState:
             if part.n_paths:  # a one-path pass has nothing for one half
                 gather(h, run[: self.live], part)
         self.passes += 1
-        self.live = min(self.live, self.best() + 1 + KEEP)
+        self.live = self.still_live()
 
-    def scores(self) -> np.ndarray:
-        """(live,) held-out score of each live step: Σ (A_s − B_s₀)² + (B_s − A_s₀)² over the
-        points, luminance of irradiance."""
+    def terms(self) -> np.ndarray:
+        """(live, n) each point's term of each live step's held-out score,
+        (A_s − B_s₀)² + (B_s − A_s₀)², luminance of irradiance."""
         a = [luminance(s.irradiance()) for s in self.runs[0][: self.live]]
         b = [luminance(s.irradiance()) for s in self.runs[1][: self.live]]
-        return np.array([np.sum((a[j] - b[0]) ** 2 + (b[j] - a[0]) ** 2) for j in range(len(a))])
+        return np.array([(a[j] - b[0]) ** 2 + (b[j] - a[0]) ** 2 for j in range(len(a))])
+
+    def scores(self) -> np.ndarray:
+        """(live,) held-out score of each live step: its terms summed over the points."""
+        return self.terms().sum(axis=1)
+
+    def still_live(self) -> int:
+        """How many steps run on: all up to the first one more than KEEP wider than the
+        minimum whose score is above it by more than Z standard errors of the difference."""
+        terms = self.terms()
+        scores = terms.sum(axis=1)
+        k = int(np.argmin(scores))
+        for j in range(k + 1 + KEEP, self.live):
+            if scores[j] - scores[k] > Z * np.sqrt(np.sum((terms[j] - terms[k]) ** 2)):
+                return j
+        return self.live
 
     def best(self) -> int:
         """The live step of least held-out score."""
