@@ -36,6 +36,7 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
+import math
 import sys
 from dataclasses import asdict
 from pathlib import Path
@@ -161,7 +162,7 @@ def run_unseen(
     if saved.exists():
         earlier = json.loads(saved.read_text())
         rows = {row["paths"]: row for row in earlier["budgets"]}
-        if earlier["reference"] != reference_record(width, paths):
+        if not same_reference(earlier["reference"], reference_record(width, paths)):
             for row in rows.values():  # tuned against another reference: retune from its bests
                 row["start"] = column_bests(row.pop("trials", []), row["paths"])
                 row["best"] = {}
@@ -212,6 +213,11 @@ def column_bests(trials: list[dict], paths: int) -> list[list]:
 def reference_record(width: float, paths: int) -> dict:
     """What a record says of the reference it was scored against."""
     return {"paths": paths, "radius": REFERENCE_FOOTPRINTS * width}
+
+
+def same_reference(a: dict, b: dict) -> bool:
+    """Whether two `reference_record`s name the same reference (radii to rounding)."""
+    return a["paths"] == b["paths"] and math.isclose(a["radius"], b["radius"], rel_tol=1e-9)
 
 
 def unseen_record(

@@ -126,14 +126,16 @@ def tune_descending(
         def at(k: int, method=method, n=n, error=error) -> float:
             """The RMSE at grid index k, run once."""
             if k not in error:
-                radius_k = np.array([radii[0] * ratio**k])
+                # the grid's own radius within it, so a trial matches the full grid's bit for bit
+                inside = 0 <= k < len(radii)
+                radius_k = np.array([radii[k] if inside else radii[0] * ratio**k])
                 trial = tune(points, photons, reference, radius_k, (n,), (method,))[0]
                 trials.append(trial)
                 error[k] = trial.rmse
             return error[k]
 
         k = int(np.clip(round(np.log(radius / radii[0]) / np.log(ratio)), 0, len(radii) - 1))
-        step = 1 if at(k + 1) < at(k) else -1
+        step = 1 if k < hi and at(k + 1) < at(k) else -1
         while lo <= k + step <= hi and at(k + step) < at(k):
             k += step  # both neighbours of the last k are known when this stops
     return trials
