@@ -209,8 +209,12 @@ def render_main(argv: Sequence[str] | None = None) -> int:
                 paths = paths if stats["spp"] != stats["passes"] else ""
                 plan = f"; {stats['passes']} passes{paths}, {stats['plan']['reason']}"
             if plan and options.denoise is not False and options.component == "full":
+                share = stats.get("denoiser_share", 1.0)
                 if not stats["denoised"]:  # auto kept its plain mean: say why
                     plan += "; not denoised: the halves of its paths show the plain mean is closer"
+                elif share < 1:  # auto blended the two: say how much
+                    plan += (f"; denoised image weighted {share:.2f} against the plain mean"
+                             " (the halves' best blend)")  # fmt: skip
             print(f"wrote {', '.join(map(str, outputs))} ({stats['width']}x{stats['height']}"
                   f"{plan}): " + timing_summary(seconds))  # fmt: skip
 
