@@ -6,7 +6,7 @@
 `radius_defaults.py` scores the methods at fixed visible points; SPPM traces new ones every
 pass, so it is scored per pixel, against the caustic references of `caustic_references.py`
 (two independent halves, so their noise is known; a uniformly scaled copy against its
-scale-1 twin's). Per scene, at M and 10·M emitted photon paths (the committed table holds M
+scale-1 twin's). Per scene, at M and 10·M emitted photon paths (the examples' rows M
 only; seed 0; one caustic photon stream traced once, its consecutive slices the passes,
 and one run per pass count for all radii, `sppm_caustics_at_radii`),
 `sppm` at its defaults (no radius,
@@ -174,11 +174,11 @@ def markdown() -> str:
         records = [json.loads(f.read_text()) for f in sorted((OUT / set_).glob("*.json"))]
         if not records:
             continue
-        rows, ratios = [], []
+        rows, ratios = [], {}
         for r in records:
             for row in r["budgets"]:
                 ratio = row["default"] / row["best"]["rmse"]
-                ratios.append(ratio)
+                ratios.setdefault(row["paths"], []).append(ratio)
                 best = row["best"]
                 rows.append([
                     r["scene"], f"{row['paths']:,}", f"{row['caustic_photons']:,}",
@@ -191,10 +191,12 @@ def markdown() -> str:
         head = ["scene", "paths", "caustic photons", "ref. noise", "ref. passes",
                 "default passes", "default", "best", "best setting", "default / best"]  # fmt: skip
         machines = "; ".join(sorted({r["machine"] for r in records}))  # RMSE: any will do
-        geo = geomean(ratios)
-        lines += ["", f"## {set_} ({machines})", "", *markdown_table(head, rows), "",
-                  f"- sppm: geometric mean {geo:.2f}, worst {max(ratios):.2f} "
-                  f"({len(ratios)} rows)"]  # fmt: skip
+        lines += ["", f"## {set_} ({machines})", "", *markdown_table(head, rows), ""]
+        lines += [
+            f"- sppm, {n:,} paths: geometric mean {geomean(v):.2f}, worst {max(v):.2f} "
+            f"({len(v)} rows, {sum(x > 2 for x in v)} above 2)"
+            for n, v in sorted(ratios.items())
+        ]
     return "\n".join(lines) + "\n"
 
 
