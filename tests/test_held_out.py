@@ -17,7 +17,7 @@ from test_density import (
 
 from dpm.density.base import luminance
 from dpm.density.gather import PointIndex
-from dpm.density.held_out import KEEP, LADDER, NARROWER, HeldOutState, half
+from dpm.density.held_out import KEEP, LADDER, NARROWER, HeldOutState, block_ids, half
 from dpm.estimators import APPM, PPM
 from dpm.estimators.cppm import CPPM
 from dpm.metrics import rmse
@@ -125,6 +125,29 @@ def test_a_wide_step_is_dropped_only_when_clearly_worse(points: int) -> None:
     state = PPM().state(points, 0.05)
     state.terms = lambda: terms  # the per-point score terms a pass would have left
     assert state.still_live() == (len(LADDER) if points == 20 else 1 + 1 + KEEP)
+
+
+def test_a_wide_step_is_kept_when_its_rise_rests_on_photons_that_points_share() -> None:
+    # 20,000 points in 200 tight clusters of 100 whose points have the same score terms
+    # (one disc's photons, found by all of them). Step 1 is the minimum; step j > 1 is 2 %
+    # a step above it on average, and ±1 cluster by cluster: over 200 independent clusters
+    # the rise is 1.7 standard errors at most, and the wide steps stay; counted as 20,000
+    # independent points it is 8.5 from step 4 on, and they go. The clusters lie a disc
+    # apart, so blocked in space each is one block.
+    clusters, size = 200, 100
+    rise = np.r_[0.5, 0.0, 0.02 * np.arange(1, len(LADDER) - 1)]
+    swing = np.r_[0.0, 0.0, np.ones(len(LADDER) - 2)][:, None] * (-1.0) ** np.arange(clusters)
+    terms = np.repeat(1.0 + rise[:, None] + swing, size, axis=1)
+    centre = np.c_[np.arange(clusters) % 20, np.arange(clusters) // 20, np.zeros(clusters)]
+    rng = np.random.default_rng(5)
+    position = np.repeat(centre + 0.1, size, axis=0) + rng.uniform(-0.02, 0.02, (len(terms[0]), 3))
+    state = PPM().state(clusters * size, 0.05)  # discs of 0.025 to 0.28: within a cluster
+    state.terms = lambda: terms
+    assert state.still_live() == 1 + 1 + KEEP  # points unplaced: taken one by one
+    state.position = position
+    assert state.still_live() == len(LADDER)
+    ids = block_ids(position, np.full(len(position), 0.28))
+    assert len(np.unique(ids)) == clusters and len(np.unique(ids[::size])) == clusters
 
 
 def test_a_given_radius_runs_the_method_alone() -> None:

@@ -14,8 +14,10 @@ small blur is shared. The run keeps the scale one step narrower than the minimum
 half the photons, and the best radius of the whole is narrower) and returns the mean of the
 two halves there. Wide scales cost the most (pairs grow with the disc's area), so after each
 pass a step more than KEEP wider than the current minimum is dropped, with the steps wider
-still, once its score is clearly above the minimum's (a paired test over the points: early
-passes are noisy); the minimum moves narrower as photons arrive. Consistent: each half is
+still, once its score is clearly above the minimum's (a paired test over the points, blocked
+in space where their positions are known: points whose discs overlap share photons, so
+they are not independent; early passes are noisy); the minimum moves narrower as photons
+arrive. Consistent: each half is
 the method's own consistent estimator at a fixed scale, so is their mean at any scale
 chosen.
 """
@@ -45,6 +47,9 @@ KEEP = 2  # steps wider than the current minimum that run whatever their score
 # A wider step is dropped only when its score exceeds the minimum's by Z standard errors of
 # the difference (a paired test over the points): early passes have few photons, and a
 # minimum that strays narrow by chance must not drop the steps the run will want later.
+# Points whose discs overlap count the same photons, so the standard error is also taken
+# over blocks of space at least as wide as the wider step's disc (`block_ids`; the larger
+# of the two is used: never more eager to drop than with the points taken one by one).
 Z = 3.0
 HALVES = 2
 
@@ -58,6 +63,20 @@ def half(photons: PhotonMap, h: int, first: int = 0) -> PhotonMap:
     scale = np.float32(photons.n_paths / max(n, 1))
     part = photons.select(mask)
     return replace(part, flux=part.flux * scale, path=part.path // 2, n_paths=n)
+
+
+def block_ids(position: np.ndarray, reach: np.ndarray) -> np.ndarray:
+    """(n,) int64 block of each point: cubes of side the power of two at or above its disc's
+    diameter 2·reach (n,) (scene units), over positions (n, 3), cubes of each side apart. Two
+    points whose discs overlap lie in the same or neighbouring blocks; a point at a position
+    that is not finite is a block of its own."""
+    side = 2.0 ** np.ceil(np.log2(np.maximum(2.0 * reach, 1e-300)))
+    key = np.column_stack([side, np.floor(position / side[:, None])])
+    ok = np.isfinite(key).all(axis=1)
+    ids = len(key) + np.arange(len(key))  # not finite: each alone, numbered past the others
+    if ok.any():
+        ids[ok] = np.unique(key[ok], axis=0, return_inverse=True)[1].ravel()
+    return ids
 
 
 class Found:
@@ -98,6 +117,8 @@ class HeldOutState:
         self.live = len(LADDER)  # steps 0 … live − 1 still run
         self.passes = 0  # passes run (a half may get no path of a one-path pass)
         self.indexes: list[PointIndex] = []  # one per half: its grids at the widest radii
+        # (n, 3) where each point lies (scene units), for the pruning's blocks; None: unknown
+        self.position: np.ndarray | None = None
 
     @property
     def paths(self) -> int:
@@ -115,6 +136,7 @@ class HeldOutState:
         the current minimum."""
         if not self.indexes:
             self.indexes = [PointIndex(index.position, index.normal) for _ in range(HALVES)]
+            self.position = index.position
 
         def gather(h: int, states: list[Any], part: PhotonMap) -> None:
             reach = np.max([state.reach for state in states], axis=0)
@@ -155,9 +177,19 @@ class HeldOutState:
         scores = terms.sum(axis=1)
         k = int(np.argmin(scores))
         for j in range(k + 1 + KEEP, self.live):
-            if scores[j] - scores[k] > Z * np.sqrt(np.sum((terms[j] - terms[k]) ** 2)):
+            d = terms[j] - terms[k]
+            if scores[j] - scores[k] > Z * np.sqrt(np.sum(d**2)) and (
+                self.position is None
+                or scores[j] - scores[k] > Z * np.sqrt(np.sum(self.block_sums(j, d) ** 2))
+            ):
                 return j
         return self.live
+
+    def block_sums(self, j: int, values: np.ndarray) -> np.ndarray:
+        """(blocks,) the per-point values (n,) summed over the blocks of space of step j's
+        discs (`block_ids`)."""
+        reach = np.maximum(self.runs[0][j].reach, self.runs[1][j].reach)
+        return np.bincount(block_ids(self.position, reach), weights=values)
 
     def best(self) -> int:
         """The live step of least held-out score."""

@@ -116,6 +116,9 @@ def sppm_caustics_at_radii(
             with watch("estimate"):
                 own = pixel_radii(points, photons)
             held_out = HeldOutState(partial(PPMState.start, alpha=alpha), pixels, own)
+            # each pixel's first visible point places it for the pruning's blocks (a pixel
+            # that sees no diffuse surface gets no photon, whatever its block)
+            held_out.position = np.where(points.hit[:, None], points.position, np.nan)
         plain = [s for s, r in zip(states, radii, strict=True) if r is not None]
         if plain:
             sppm_gather(plain, points, photons, watch)
