@@ -31,12 +31,12 @@ from pathlib import Path
 
 import numpy as np
 from caustic_references import load_reference, size
-from sppm_defaults import RADII, scene_names
+from sppm_defaults import RADII, past_edge, save, scene_names, set_report
 
 sys.path.insert(0, str(Path(__file__).parent / "scenes"))
 from make_unseen import unit_scale  # noqa: E402
 
-from common import RESULTS, M, cpu, geomean, markdown_table  # noqa: E402
+from common import RESULTS, M, cpu  # noqa: E402
 from dpm import load_scene  # noqa: E402
 from dpm.io import atomic  # noqa: E402
 from dpm.methods.auto import PHOTONS_PER_PIXEL, RADIUS_FOOTPRINTS  # noqa: E402
@@ -47,7 +47,6 @@ from dpm.tracer import build_bvh, trace_visible_points  # noqa: E402
 
 OUT = RESULTS / "auto_radius"
 TABLE = RESULTS / "auto_radius.md"
-EXTEND = 3  # radii added past an edge the best lands on (twice at most)
 
 
 def auto_passes(paths: int, pixels: int) -> int:
@@ -87,18 +86,12 @@ def run_scene(name: str, set_: str, budgets: tuple[int, ...]) -> dict:
             "paths": n, "passes": passes, "default": default, "network": network,
             "reference_passes": reference_passes, "trials": [],
         }  # fmt: skip
-        radii, tried, step = list(pixel * RADII), [], RADII[1] / RADII[0]
-        while True:
+        radii, tried = list(pixel * RADII), []
+        while radii:  # the grid, then past an edge the best lands on (`past_edge`)
             tried += radii
             row["trials"] += [{"radius": r, "rmse": score(r)[0]} for r in radii]
             best = min(row["trials"], key=lambda t: t["rmse"])
-            low, high = min(tried), max(tried)
-            if best["radius"] == low and len(tried) < len(RADII) + 2 * EXTEND:
-                radii = [low / step**k for k in range(1, EXTEND + 1)]
-            elif best["radius"] == high and len(tried) < len(RADII) + 2 * EXTEND:
-                radii = [high * step**k for k in range(1, EXTEND + 1)]
-            else:
-                break
+            radii = past_edge(tried, best["radius"])
         row["best"] = best
         rows.append(row)
         print(name, n, f"default {default:.5f} best {best}", flush=True)
@@ -108,13 +101,6 @@ def run_scene(name: str, set_: str, budgets: tuple[int, ...]) -> dict:
             "machine": cpu(), "date": datetime.date.today().isoformat(),
         })  # fmt: skip
     return json.loads(path.read_text())
-
-
-def save(path: Path, record: dict) -> None:
-    """Write a JSON record atomically."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic(path) as tmp:
-        tmp.write_text(json.dumps(record, indent=1))
 
 
 def markdown() -> str:
@@ -130,30 +116,19 @@ def markdown() -> str:
         "the reference, in auto's own passes. The default was chosen on the examples; the",
         "unseen scenes were never tuned on.",
     ]
+    head = ["scene", "paths", "passes", "network", "ref. noise", "default", "best",
+            "best radius", "default / best"]  # fmt: skip
+
+    def cells(r: dict, row: dict, ratio: float) -> list[str]:
+        return [
+            r["scene"], f"{row['paths']:,}", f"{row['passes']}",
+            "yes" if row["network"] else "no", f"{r['noise']:.4f}",
+            f"{row['default']:.4f}", f"{row['best']['rmse']:.4f}",
+            f"{row['best']['radius'] / r['pixel_width']:.2f} px", f"{ratio:.2f}",
+        ]  # fmt: skip
+
     for set_ in ("examples", "unseen"):
-        records = [json.loads(f.read_text()) for f in sorted((OUT / set_).glob("*.json"))]
-        if not records:
-            continue
-        rows, ratios = [], {}
-        for r in records:
-            for row in r["budgets"]:
-                ratio = row["default"] / row["best"]["rmse"]
-                ratios.setdefault(row["paths"], []).append(ratio)
-                rows.append([
-                    r["scene"], f"{row['paths']:,}", f"{row['passes']}",
-                    "yes" if row["network"] else "no", f"{r['noise']:.4f}",
-                    f"{row['default']:.4f}", f"{row['best']['rmse']:.4f}",
-                    f"{row['best']['radius'] / r['pixel_width']:.2f} px", f"{ratio:.2f}",
-                ])  # fmt: skip
-        head = ["scene", "paths", "passes", "network", "ref. noise", "default", "best",
-                "best radius", "default / best"]  # fmt: skip
-        machines = "; ".join(sorted({r["machine"] for r in records}))
-        lines += ["", f"## {set_} ({machines})", "", *markdown_table(head, rows), ""]
-        for n, values in sorted(ratios.items()):
-            lines.append(
-                f"- {n:,} paths: geometric mean {geomean(values):.2f}, worst "
-                f"{max(values):.2f} ({len(values)} rows, {sum(v > 2 for v in values)} above 2)"
-            )
+        lines += set_report(OUT, set_, head, cells)
     return "\n".join(lines) + "\n"
 
 

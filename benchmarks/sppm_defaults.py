@@ -28,6 +28,7 @@ import argparse
 import datetime
 import json
 import sys
+from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 
@@ -102,7 +103,7 @@ def run_scene(name: str, set_: str, budgets: tuple[int, ...], defaults_only: boo
             save_record(path, name, set_, (width, height), noise, pixel, rows)
             continue
         row = {"paths": n, "caustic_photons": len(stream), **default, "trials": []}
-        radii, tried, step = list(pixel * RADII), [], RADII[1] / RADII[0]
+        radii, tried = list(pixel * RADII), []
         while True:  # one run per pass count tries a round's radii at once
             tried += radii
             for p in PASSES:
@@ -111,18 +112,52 @@ def run_scene(name: str, set_: str, budgets: tuple[int, ...], defaults_only: boo
                     for r, e in zip(radii, scores(radii, -(-n // p)), strict=True)
                 ]  # fmt: skip
             best = min(row["trials"], key=lambda t: t["rmse"])
-            low, high = min(tried), max(tried)
-            if best["radius"] == low and len(tried) < len(RADII) + 2 * EXTEND:
-                radii = [low / step**k for k in range(1, EXTEND + 1)]
-            elif best["radius"] == high and len(tried) < len(RADII) + 2 * EXTEND:
-                radii = [high * step**k for k in range(1, EXTEND + 1)]
-            else:
+            radii = past_edge(tried, best["radius"])
+            if not radii:
                 break
         row["best"] = best
         rows.append(row)
         print(name, n, f"default {row['default']:.5f} best {best}", flush=True)
         save_record(path, name, set_, (width, height), noise, pixel, rows)
     return json.loads(path.read_text())
+
+
+def past_edge(tried: list[float], best: float) -> list[float]:
+    """EXTEND more radii of the grid's step past the edge of the radii tried that the best
+    radius lies on; none where it lies inside, or the grid has grown twice already."""
+    step, low, high = RADII[1] / RADII[0], min(tried), max(tried)
+    if len(tried) >= len(RADII) + 2 * EXTEND or low < best < high:
+        return []
+    return [low / step**k if best == low else high * step**k for k in range(1, EXTEND + 1)]
+
+
+def records(out: Path, set_: str) -> list[dict]:
+    """The scene records of a set under a benchmark's results folder, by scene name."""
+    return [json.loads(f.read_text()) for f in sorted((out / set_).glob("*.json"))]
+
+
+def set_report(
+    out: Path, set_: str, head: list[str], cells: Callable[[dict, dict, float], list[str]],
+    label: str = "",
+) -> list[str]:  # fmt: skip
+    """A set's Markdown section (none without records): a table row per scene and budget,
+    `cells(record, row, default / best)`, then the geometric mean and worst per budget."""
+    records_ = records(out, set_)
+    if not records_:
+        return []
+    rows, ratios = [], {}
+    for r in records_:
+        for row in r["budgets"]:
+            ratio = row["default"] / row["best"]["rmse"]
+            ratios.setdefault(row["paths"], []).append(ratio)
+            rows.append(cells(r, row, ratio))
+    machines = "; ".join(sorted({r["machine"] for r in records_}))  # RMSE: any will do
+    lines = ["", f"## {set_} ({machines})", "", *markdown_table(head, rows), ""]
+    return lines + [
+        f"- {label}{n:,} paths: geometric mean {geomean(v):.2f}, worst {max(v):.2f} "
+        f"({len(v)} rows, {sum(x > 2 for x in v)} above 2)"
+        for n, v in sorted(ratios.items())
+    ]
 
 
 def save_record(
@@ -170,33 +205,22 @@ def markdown() -> str:
         "10/100/1000 passes, tuned against the reference). The defaults were chosen on the",
         "examples; the unseen scenes were never tuned on.",
     ]
+    head = ["scene", "paths", "caustic photons", "ref. noise", "ref. passes",
+            "default passes", "default", "best", "best setting", "default / best"]  # fmt: skip
+
+    def cells(r: dict, row: dict, ratio: float) -> list[str]:
+        best = row["best"]
+        return [
+            r["scene"], f"{row['paths']:,}", f"{row['caustic_photons']:,}",
+            f"{r['noise']:.4f}", f"{row.get('reference_passes', '–')}",
+            f"{-(-row['paths'] // row['default_per_pass'])}",
+            f"{row['default']:.4f}", f"{best['rmse']:.4f}",
+            f"{best['radius'] / r['pixel_width']:.2f} px, {best['passes']} passes",
+            f"{ratio:.2f}",
+        ]  # fmt: skip
+
     for set_ in ("examples", "unseen"):
-        records = [json.loads(f.read_text()) for f in sorted((OUT / set_).glob("*.json"))]
-        if not records:
-            continue
-        rows, ratios = [], {}
-        for r in records:
-            for row in r["budgets"]:
-                ratio = row["default"] / row["best"]["rmse"]
-                ratios.setdefault(row["paths"], []).append(ratio)
-                best = row["best"]
-                rows.append([
-                    r["scene"], f"{row['paths']:,}", f"{row['caustic_photons']:,}",
-                    f"{r['noise']:.4f}", f"{row.get('reference_passes', '–')}",
-                    f"{-(-row['paths'] // row['default_per_pass'])}",
-                    f"{row['default']:.4f}", f"{best['rmse']:.4f}",
-                    f"{best['radius'] / r['pixel_width']:.2f} px, {best['passes']} passes",
-                    f"{ratio:.2f}",
-                ])  # fmt: skip
-        head = ["scene", "paths", "caustic photons", "ref. noise", "ref. passes",
-                "default passes", "default", "best", "best setting", "default / best"]  # fmt: skip
-        machines = "; ".join(sorted({r["machine"] for r in records}))  # RMSE: any will do
-        lines += ["", f"## {set_} ({machines})", "", *markdown_table(head, rows), ""]
-        lines += [
-            f"- sppm, {n:,} paths: geometric mean {geomean(v):.2f}, worst {max(v):.2f} "
-            f"({len(v)} rows, {sum(x > 2 for x in v)} above 2)"
-            for n, v in sorted(ratios.items())
-        ]
+        lines += set_report(OUT, set_, head, cells, "sppm, ")
     return "\n".join(lines) + "\n"
 
 
