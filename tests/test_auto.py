@@ -337,6 +337,14 @@ def test_the_denoisers_share_is_what_the_halves_show_it_earns(
     flattened = flat(plain.image, None, None)
     assert rmse(blend.image, converged) <= 1.001 * rmse(plain.image, converged)
     assert rmse(blend.image, converged) < rmse(flattened, converged)
+    # one that returns the converged image 10 % too bright earns part of the share
+    monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal: 1.1 * converged)
+    biased = render(diffuse, options(spp=64, seed=2))
+    assert 0 < biased.stats["denoiser_share"] < 1
+    # one that moves nothing (or whose every move the restore undoes) leaves the image alone
+    monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal: color)
+    idle = render(diffuse, options(spp=64, seed=1))
+    assert idle.stats["denoiser_share"] == 1 and idle.stats["denoised"]
     noisier = lambda color, albedo, normal: color + 3.0 * (color - converged)  # noqa: E731
     monkeypatch.setattr(auto, "denoise", noisier)
     late = render(diffuse, options(spp=64, seed=2))
@@ -350,6 +358,9 @@ def test_the_denoisers_share_is_what_the_halves_show_it_earns(
         argv = [str(scene), "--spp", "64", "-o", str(tmp_path / "o.exr"), *flags]
         assert render_main(argv) == 0
         assert ("not denoised" in capsys.readouterr().out) == said
+    monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal: 1.1 * converged)
+    assert render_main([str(scene), "--spp", "64", "-o", str(tmp_path / "o.exr")]) == 0
+    assert "denoised image weighted 0." in capsys.readouterr().out
 
 
 def test_light_seen_in_glass_that_every_sample_finds_skips_the_denoiser(
