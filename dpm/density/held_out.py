@@ -172,7 +172,9 @@ class HeldOutState:
 
     def still_live(self) -> int:
         """How many steps run on: all up to the first one more than KEEP wider than the
-        minimum whose score is above it by more than Z standard errors of the difference."""
+        minimum whose score is above it by more than Z standard errors of the difference,
+        taken over the points and, where their positions are known, over blocks of space
+        (`block_sums`)."""
         terms = self.terms()
         scores = terms.sum(axis=1)
         k = int(np.argmin(scores))

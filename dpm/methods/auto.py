@@ -636,10 +636,11 @@ class Passes:
                 total = total.reshape(h, w)
                 weight = m.denoiser_share = self.denoiser_share(total)
                 m.denoised = weight > 0
-                restored = restore_certain(image, denoised, total)
-                if 0 < weight < 1:  # (the ends exactly: 0·inf would be NaN)
-                    restored = (weight * restored + (1.0 - weight) * image).astype(np.float32)
-                image = restored if m.denoised else image
+                if m.denoised:  # the ends exactly (0·inf would be NaN)
+                    restored = restore_certain(image, denoised, total)
+                    image = restored if weight >= 1 else (
+                        weight * restored + (1.0 - weight) * image
+                    ).astype(np.float32)  # fmt: skip
         return image + np.where(after, seen, 0).astype(np.float32).reshape(h, w, 3)
 
     def denoiser_share(self, error: np.ndarray) -> float:
