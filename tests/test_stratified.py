@@ -12,7 +12,7 @@ from analytic import polygon_form_factor
 
 from dpm import load_scene
 from dpm.data import builder
-from dpm.tracer import build_bvh, trace_pixels
+from dpm.tracer import build_bvh, trace_listed, trace_pixels
 from dpm.tracer.lights import sample_light_stratified
 from dpm.tracer.sampling import pixel_sequence, stratified2, turn
 
@@ -79,11 +79,7 @@ def test_stratified_path_tracing_is_unbiased_and_less_noisy(tmp_path: Path) -> N
     # form factor) against pt's 16 paths per pixel with and without the pixels' sequences.
     scene = load_scene(floor_under_light(tmp_path / "floor"))
     bvh, camera = build_bvh(scene), scene.camera
-    corners = np.unique(scene.triangles[scene.emitters.triangles].reshape(-1, 3), axis=0)
-    centre = corners.mean(axis=0)
-    order = np.argsort(np.arctan2(corners[:, 2] - centre[2], corners[:, 0] - centre[0]))
-    square = corners[order]
-    truth = _pixel_truth(camera, lambda p: RHO * LE * polygon_form_factor(p, UP, square))
+    truth = _lit_floor_truth(scene, camera)
     error = {}
     for name, sequence in (("random", None), ("stratified", (11, 0))):
         images = [
@@ -95,6 +91,48 @@ def test_stratified_path_tracing_is_unbiased_and_less_noisy(tmp_path: Path) -> N
         spread = grey.std(axis=0, ddof=1).mean() / math.sqrt(grey.size)
         assert abs(grey.mean() - truth.mean()) < 4 * spread + 1e-3 * truth.mean()
     assert error["stratified"] < 0.6 * error["random"]
+
+
+def test_listed_paths_extend_their_sequence_call_after_call(tmp_path: Path) -> None:
+    # Adaptive sampling's extra paths (`trace_listed`): 16 paths per pixel drawn in two calls
+    # of 8, the second going on from point 8 of each pixel's sequence, are unbiased and as
+    # much less noisy than independent paths as one call of 16 stratified ones.
+    scene = load_scene(floor_under_light(tmp_path / "floor"))
+    bvh, camera = build_bvh(scene), scene.camera
+    truth = _lit_floor_truth(scene, camera)
+    pixels = np.arange(camera.width * camera.height)
+    eight = np.full(len(pixels), 8)
+    error = {}
+    for name in ("random", "one call", "two calls"):
+        images = []
+        for seed in (1, 2, 3, 4):
+            if name == "random":
+                sums = trace_listed(scene, bvh, camera, pixels, 2 * eight, seed)[0]
+            elif name == "one call":
+                sums = trace_listed(scene, bvh, camera, pixels, 2 * eight, seed, None, True,
+                                    (seed, 0 * eight))[0]  # fmt: skip
+            else:  # the second call's streams and sequence points both go on from the first's
+                sums = sum(
+                    trace_listed(scene, bvh, camera, pixels, eight, 10 * seed + k, None, True,
+                                 (seed, k * eight))[0]
+                    for k in (0, 1)
+                )  # fmt: skip
+            images.append((sums / 16).mean(axis=-1).reshape(camera.height, camera.width))
+        grey = np.array(images)
+        error[name] = float(np.sqrt(np.mean((grey - truth) ** 2)))
+        spread = grey.std(axis=0, ddof=1).mean() / math.sqrt(grey.size)
+        assert abs(grey.mean() - truth.mean()) < 4 * spread + 1e-3 * truth.mean()
+    assert error["one call"] < 0.4 * error["random"]  # direct light: only stratified dims
+    assert error["two calls"] < 1.2 * error["one call"]  # 8 points twice over: 2.5 times
+
+
+def _lit_floor_truth(scene, camera) -> np.ndarray:
+    """(H, W) closed-form pixel means of `floor_under_light` (Lambert's form factor)."""
+    corners = np.unique(scene.triangles[scene.emitters.triangles].reshape(-1, 3), axis=0)
+    centre = corners.mean(axis=0)
+    order = np.argsort(np.arctan2(corners[:, 2] - centre[2], corners[:, 0] - centre[0]))
+    square = corners[order]
+    return _pixel_truth(camera, lambda p: RHO * LE * polygon_form_factor(p, UP, square))
 
 
 UP = np.array([0.0, 1.0, 0.0])

@@ -545,12 +545,16 @@ class Passes:
         """Extra camera paths where this half's pixels vary most (`dpm.methods.adaptive`)."""
         with self.watch("adaptive"):
             budget = round(EXTRA_PER_PIXEL * self.pixels * self.k)
-            extra, counts = self.paths.plan_extra(self.j % 2, budget, EXTRA_CAP * self.k)
+            half = self.j % 2
+            extra, counts = self.paths.plan_extra(half, budget, EXTRA_CAP * self.k)
+            # each half's extra paths of a pixel extend a stratified sequence of their own
+            done = self.paths.extra[half].count[extra].astype(np.int64)
             sums, squares, bad = trace_listed(
                 self.scene, self.bvh, self.camera, extra, counts,
                 pass_seed(self.o.seed, self.j, 1), self.grid, not self.separate,
+                (sequence_seed(self.o.seed, half, extra=True), done),
             )  # fmt: skip
-            self.paths.extra[self.j % 2].add(extra, counts, sums, squares)
+            self.paths.extra[half].add(extra, counts, sums, squares)
             self.extra_paths += int(counts.sum())
             self.dropped += bad
 

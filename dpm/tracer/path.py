@@ -408,18 +408,19 @@ def _pixels(
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
 def listed_kernel(
-    bvh, depth, sc, cam, width, height, pixels, first, counts, stride, seed, eps, emission,
-    grid, out, sq,
+    bvh, depth, sc, cam, width, height, pixels, first, counts, stride, seed, sequence, qfirst,
+    eps, emission, grid, out, sq,
 ):  # fmt: skip
     """Per listed task: the radiance sums (L, 3) of counts[i] camera paths of pixels[i]
-    (streams pixel·stride + first[i] + 0 … counts[i]-1) into out, their squared luminances'
-    sum into sq; returns the non-finite samples dropped."""
+    (streams pixel·stride + first[i] + 0 … counts[i]-1; with sequence ≥ 0, points qfirst[i]
+    + 0 … of the pixel's stratified sequence) into out, their squared luminances' sum into
+    sq; returns the non-finite samples dropped."""
     bad = np.zeros(len(pixels), np.int64)
     for i in nb.prange(len(pixels)):
         stack = new_stack(depth)
         v = path_pixel(
-            bvh, sc, cam, width, height, pixels[i], first[i], counts[i], stride, seed, -1, 0,
-            eps, False, emission, grid, stack,
+            bvh, sc, cam, width, height, pixels[i], first[i], counts[i], stride, seed,
+            sequence, qfirst[i], eps, False, emission, grid, stack,
         )  # fmt: skip
         out[i, 0], out[i, 1], out[i, 2], sq[i], bad[i] = v[0], v[1], v[2], v[11], v[10]
     return bad.sum()
@@ -434,13 +435,16 @@ def trace_listed(
     seed: int,
     grid: PhotonGrid | None = None,
     emission: bool = True,
+    sequence: tuple[int, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, int]:
     """More camera paths at some pixels, as pt-nocaustic (or `auto`'s paths with a photon
     grid) would trace them: pixels (L,) row-major indices, counts (L,) paths each. Returns the
     radiance sums (L, 3) float64, the sums of each path's squared luminance (L,) float64 and
     the non-finite samples dropped (emission False: without the light seen along the camera's
     specular chains). Streams are pixel·max(counts) + 0 … counts-1, so a seed not used for the
-    pixels' other paths gives independent samples."""
+    pixels' other paths gives independent samples. With `sequence` (seed, first (L,)), pixel
+    i's paths are points first[i] … of its stratified sequence in their position and first
+    vertices (`stratified2`): calls with one seed and first = the paths so far extend it."""
     pixels = np.asarray(pixels, np.int64)
     counts = np.asarray(counts, np.int64)
     out = np.zeros((len(pixels), 3))
@@ -455,10 +459,12 @@ def trace_listed(
     first = first * PATHS_PER_TASK
     task_counts = np.minimum(counts[owner] - first, PATHS_PER_TASK)
     task_out, task_sq = np.zeros((len(owner), 3)), np.zeros(len(owner))
+    qseed, done = (-1, np.zeros(len(pixels), np.int64)) if sequence is None else sequence
+    qfirst = np.asarray(done, np.int64)[owner] + first
     bad = listed_kernel(
         bvh.arrays, bvh.depth, scene.kernel_arrays(), camera.basis(), camera.width,
-        camera.height, pixels[owner], first, task_counts, int(counts.max()), seed,
-        spawn_offset(scene), emission, grid, task_out, task_sq,
+        camera.height, pixels[owner], first, task_counts, int(counts.max()), seed, qseed,
+        qfirst, spawn_offset(scene), emission, grid, task_out, task_sq,
     )  # fmt: skip
     np.add.at(out, owner, task_out)
     np.add.at(sq, owner, task_sq)

@@ -208,8 +208,9 @@ def pixel_sequence(seed, pix):
     return mix64(mix64(np.uint64(seed) * _GOLDEN + np.uint64(pix)) ^ _M2)
 
 
-def sequence_seed(seed: int, half: int = 0) -> int:
+def sequence_seed(seed: int, half: int = 0, extra: bool = False) -> int:
     """The seed (≥ 0) of the pixels' stratified sequences of a render's seed, or of one of its
-    halves (`auto`: each half's passes extend one sequence): independent of the random
-    streams' seeds."""
-    return int(np.random.SeedSequence([seed, half, 0x5EC]).generate_state(1)[0])
+    halves (`auto`: each half's passes extend one sequence, and with `extra` its adaptive
+    paths another): independent of the random streams' seeds and of each other."""
+    entropy = [seed, half, 0x5EC] + ([1] if extra else [])
+    return int(np.random.SeedSequence(entropy).generate_state(1)[0])
