@@ -7,6 +7,7 @@ import math
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -111,9 +112,13 @@ def test_the_budget_stops_before_the_pass_that_would_overrun_it(glass, monkeypat
     # out of the pass's: with a 0.1 s tick the first pass counts 0.2 s, each later one 0.1,
     # and pass j ends at 0.4 + 0.1 j. The render must stop after the first pass whose
     # successor would end past the budget less the finishing reserve.
+    # (the denoiser's call is timed after the first pass: here 0.05 s, with no clock read)
     monkeypatch.setattr(auto, "time", FakeClock(0.1))
+    monkeypatch.setattr(auto.Passes, "time_denoiser", lambda self: 0.05)
     budget = 2.0
-    finish = auto.FINISH_SECONDS + auto.FINISH_SECONDS_PER_PIXEL * 24 * 16
+    calls = 1  # a scene with glass: no `denoiser_share`, one denoiser call to come
+    finish = auto.FINISH_SECONDS + auto.WRITE_SECONDS_PER_PIXEL * 24 * 16
+    finish += auto.FINISH_MARGIN * (calls + auto.REST_CALLS) * 0.05
     result = render(glass, options(time=budget), started=0.0)
     expected = next(j for j in range(2, 100) if 0.4 + 0.1 * j + 0.1 + finish > budget)
     assert result.stats["passes"] == expected
@@ -121,8 +126,30 @@ def test_the_budget_stops_before_the_pass_that_would_overrun_it(glass, monkeypat
     assert 0.4 + 0.1 * expected + finish <= budget  # the last pass ended inside the budget
 
 
+def test_the_denoisers_call_is_timed_on_a_quarter_and_scaled_to_the_image(monkeypatch) -> None:
+    # A stand-in denoiser that takes 1 ms per pixel of the fake clock, and nothing else
+    # moves it: the first call (OIDN's loading) is not counted, the second, on a quarter of
+    # the 24 x 16 image, is scaled by four.
+    clock = FakeClock(0.0)
+    calls = []
+
+    def slow(color, albedo, normal):
+        calls.append(color.shape)
+        clock.now += 1e-3 * color.shape[0] * color.shape[1]
+        return color
+
+    monkeypatch.setattr(auto, "time", clock)
+    monkeypatch.setattr(auto, "denoise", slow)
+    passes = SimpleNamespace(
+        h=16, w=24, pixels=384, k=1, paths=auto.Halves(16, 24), guide_sums=np.ones((2, 2, 384, 3))
+    )
+    assert auto.Passes.time_denoiser(passes) == pytest.approx(0.384)
+    assert calls == [(8, 12, 3), (8, 12, 3)]
+
+
 def test_a_budgeted_render_is_reproduced_by_its_pass_count(glass, monkeypatch) -> None:
     monkeypatch.setattr(auto, "time", FakeClock(0.1))
+    monkeypatch.setattr(auto.Passes, "time_denoiser", lambda self: 0.01)  # (no clock read)
     timed = render(glass, options(time=1.0, seed=4), started=0.0)
     plan = timed.stats["plan"]
     assert plan["caustics"] == "sppm" and timed.stats["caustic_photons"] > 0
@@ -170,6 +197,7 @@ def test_a_budgeted_render_of_whole_pixels_is_reproduced_by_its_paths(diffuse, m
     # Every pass takes 0.1 s on this clock whatever its paths, so the budget's last pass is
     # cut to what the time left holds; --spp of the render's paths makes the same passes.
     monkeypatch.setattr(auto, "time", FakeClock(0.1))
+    monkeypatch.setattr(auto.Passes, "time_denoiser", lambda self: 0.01)  # (no clock read)
     timed = render(diffuse, options(time=1.7, seed=4), started=0.0)
     assert timed.stats["spp"] > timed.stats["passes"] > 1
     again = render(diffuse, options(spp=timed.stats["spp"], seed=4))

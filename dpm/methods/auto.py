@@ -112,10 +112,14 @@ SPARSE_PHOTONS, SPREAD_WINDOWS = 1.0 / SEEN_ERROR**2, (3, 5, 9, 17, 33)
 # halves' sums). 8 paths per pixel at 128², 1 from 512² (where a pass is long already).
 PASS_SAMPLES = 1 << 17
 MIN_CAUSTIC_SHARE = 1e-3  # caustics under this share of the first pass's light are left out
-# Seconds kept for what follows the last pass (denoising, writing): a fixed part and per pixel,
-# and per pixel for `Passes.denoiser_share` where it runs (two more denoiser calls on whole
-# images, each 1.4-2.9 µs per pixel on 2 cores: alone, and with a test run beside it).
-FINISH_SECONDS, FINISH_SECONDS_PER_PIXEL, CHECK_SECONDS_PER_PIXEL = 0.05, 3e-6, 6e-6
+# Seconds kept for what follows the last pass: a fixed part, per pixel for writing (EXR and
+# PNG: 0.15 s at 512²) and, where the image is denoised, FINISH_MARGIN times the denoiser
+# calls to come (one; two more where `Passes.denoiser_share` runs) and the rest of the finish
+# (restore, error maps: REST_CALLS calls' worth), at what one call takes on this machine now
+# (`Passes.time_denoiser`, after the first pass). Measured on the idle 2-core host: OIDN
+# 0.63-0.72 µs per pixel, 2.3 times that beside two busy processes, the rest 0.9-1.4 µs;
+# a fixed 9 µs per pixel (the guess before) kept 1-1.5 s of a 512² render's budget idle.
+FINISH_SECONDS, WRITE_SECONDS_PER_PIXEL, FINISH_MARGIN, REST_CALLS = 0.03, 6e-7, 1.25, 1.5
 SQRT2 = np.sqrt(2.0)  # a half's standard error per pixel, in the whole image's
 # The learned caustic filter's seconds per pixel on 2 cores (measured), and the most of a
 # --time budget it may take: past it the plan leaves it out.
@@ -373,11 +377,11 @@ class Passes:
         self.guide_sums = np.zeros((2, 2, self.pixels, 3))
         self.deadline = None if o.time is None else started + o.time
         self.separate = has_specular(scene)  # the light seen apart from the paths: see below
-        denoised = self.full and method.denoises(o)
-        checked = denoised and not self.separate  # `denoiser_share` may run
-        self.finish_seconds = FINISH_SECONDS + self.pixels * (
-            FINISH_SECONDS_PER_PIXEL * denoised + CHECK_SECONDS_PER_PIXEL * checked
-        )
+        denoising = self.full and method.denoises(o)
+        # the denoiser calls to come after the last pass (`denoiser_share` may run two more),
+        # reserved for once they are timed (`time_denoiser`)
+        self.calls = denoising * (1 + 2 * (not self.separate))
+        self.finish_seconds = FINISH_SECONDS + WRITE_SECONDS_PER_PIXEL * self.pixels
         # Photon paths per pass: without a budget, --photons shared by the --spp passes; with
         # one, --photons-per-pass or the plan's (the first pass already uses it, so a --time
         # render of N passes of P paths is the render with --spp N --photons N·P).
@@ -433,6 +437,10 @@ class Passes:
             once = time.monotonic()
             if self.plan is None:
                 self.make_plan()
+            if self.deadline is not None and self.calls:
+                with self.watch("denoise"):
+                    call = self.time_denoiser()
+                self.finish_seconds += FINISH_MARGIN * (self.calls + REST_CALLS) * call
             if self.full and (self.deadline is not None or self.o.spp > 1):
                 with self.watch("kernels"):
                     warm_later_kernels(
@@ -447,6 +455,18 @@ class Passes:
         self.j += 1
         self.grid_radius *= np.sqrt((self.j + ALPHA) / (self.j + 1))  # Knaus & Zwicker, Eq. 17
         self.bar.update(self.k)
+
+    def time_denoiser(self) -> float:
+        """Seconds one denoiser call on the whole image takes on this machine now: four times
+        a call on a quarter of the first pass's image, after one that loads OIDN (which the
+        finish then need not)."""
+        h, w = max(1, self.h // 2), max(1, self.w // 2)
+        image = self.paths.mean().reshape(self.h, self.w, 3)[:h, :w].astype(np.float32)
+        albedo, normal = (g.reshape(self.h, self.w, 3)[:h, :w] / self.k for g in self.guide_sums[0])
+        denoise(image, albedo, normal)
+        begun = time.monotonic()
+        denoise(image, albedo, normal)
+        return (time.monotonic() - begun) * self.pixels / (h * w)
 
     def pass_paths(self) -> int:
         """Camera paths per pixel the next pass is planned to take: one, or where passes take
