@@ -224,11 +224,15 @@ def render_main(argv: Sequence[str] | None = None) -> int:
 def render_command() -> None:
     """The `dpm-render` console script: render_main, then exit without the interpreter's
     teardown (about 0.4 s of freeing Numba's and LLVM's modules; every file is closed and
-    renamed into place by then). Numba starts without the optional imports no kernel needs
-    (`dpm.tracer._lean_numba`: 0.2 s of a 2-s render's start)."""
-    from dpm.tracer._lean_numba import load_registries_lean
+    renamed into place by then). The garbage collector waits until the renderer has loaded
+    (`dpm.collector`), and Numba loads cached kernels without its registries and compiles
+    without the optional imports no kernel needs (`dpm._lean_numba`)."""
+    from dpm import collector
 
-    load_registries_lean()
+    collector.pause()
+    from dpm._lean_numba import start_lean  # (imports Numba)
+
+    start_lean()
     code = render_main()
     sys.stdout.flush()
     sys.stderr.flush()

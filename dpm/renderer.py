@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from tqdm import tqdm
 
+from dpm import collector
 from dpm.camera import Camera
 from dpm.compiling import CompileWatch
 from dpm.denoise import denoise, guides
@@ -87,6 +88,7 @@ def render(
     options = options or RenderOptions()
     with CompileWatch(options.progress) as compiling:
         result = _render(scene, options, started)
+    collector.resume()  # (where auto's first pass did not already)
     # Seconds Numba spent compiling kernels inside this render: 0 once the renderer is warm.
     result.stats["compile_seconds"] = compiling.seconds
     result.stats["compiled_kernels"] = compiling.kernels

@@ -38,12 +38,13 @@ def test_a_warm_render_compiles_nothing(scene_path) -> None:
 
 
 def test_the_tracer_starts_without_scipy_linalg_or_cffi() -> None:
-    """After `load_registries_lean` (what `dpm-render` does first), Numba's first use in a
-    fresh process loads neither scipy.linalg nor cffi, and both still import afterwards."""
+    """After `start_lean` (what `dpm-render` does first), Numba's first use in a fresh process
+    (compiling or loading from the cache) imports neither scipy.linalg nor cffi, and both
+    still import afterwards."""
     code = (
         "import sys, numpy as np\n"
-        "from dpm.tracer._lean_numba import load_registries_lean\n"
-        "load_registries_lean()\n"
+        "from dpm._lean_numba import start_lean\n"
+        "start_lean()\n"
         "from dpm.tracer import build_bvh, intersect\n"
         "tri = np.array([[[0, 0, 1], [1, 0, 1], [0, 1, 1]]], np.float32)\n"
         "bvh = build_bvh(tri)\n"
@@ -58,17 +59,63 @@ def test_the_tracer_starts_without_scipy_linalg_or_cffi() -> None:
     assert out.stdout.split("\n")[:2] == ["[]", "True scipy.linalg.cython_blas"], out.stderr
 
 
-def test_the_render_script_starts_numba_lean() -> None:
-    """`dpm-render`'s console script loads Numba's array-math registry the lean way before
-    anything else (`render_main` stood in for: it would render)."""
+# a few kernels: a BVH, closest hits, a path-traced image; then a kernel new to Numba
+_KERNELS = """
+import sys, numpy as np
+if sys.argv[1] == "lean":
+    from dpm._lean_numba import start_lean
+    start_lean()
+from numba.core.registry import cpu_target
+from dpm import load_file
+from dpm.renderer import RenderOptions, render
+scene = load_file(sys.argv[2])
+options = RenderOptions(method="pt", width=12, height=10, spp=2, denoise=False, progress=False)
+image = render(scene, options).image
+loaded = len(cpu_target.target_context._registries)
+skipped = not any(m in sys.modules for m in ("scipy.linalg", "cffi"))
+import numba
+from numba.typed import List
+
+@numba.njit
+def fresh(n):
+    values = List()
+    for i in range(n):
+        values.append(np.sqrt(np.float64(i)))
+    return values[n - 1]
+
+print(image.tobytes().hex(), loaded, skipped, fresh(10) == 3.0)
+"""
+
+
+def test_cached_kernels_load_lean_and_compute_the_same(scene_path) -> None:
+    """`start_lean`'s cache load leaves Numba's registries unloaded (and scipy.linalg and
+    cffi, which the kernels' environments would import), the image is the one a plain
+    process renders, bit for bit, and a kernel new to Numba still compiles after."""
+    args = [sys.executable, "-c", _KERNELS]
+    plain = subprocess.run([*args, "plain", str(scene_path)], capture_output=True, text=True)
+    assert plain.returncode == 0, plain.stderr  # (compiles the kernels where not cached)
+    lean = subprocess.run([*args, "lean", str(scene_path)], capture_output=True, text=True)
+    assert lean.returncode == 0, lean.stderr
+    image, loaded, skipped, fresh = lean.stdout.split()
+    assert image == plain.stdout.split()[0]
+    assert loaded == "0" and plain.stdout.split()[1] != "0"  # the plain load refreshed them
+    assert skipped == "True" and fresh == "True"
+
+
+def test_the_render_script_starts_lean() -> None:
+    """`dpm-render`'s console script pauses the garbage collector and makes Numba load
+    cached kernels the lean way before anything else (`render_main` stood in for: it would
+    render)."""
     code = (
-        "import sys, dpm.cli as cli\n"
+        "import gc, sys, dpm.cli as cli\n"
         "def main():\n"
-        "    from numba.np import arraymath\n"
-        "    print('cffi' in sys.modules, 'scipy.linalg' in sys.modules, arraymath._HAVE_BLAS)\n"
+        "    from numba.core import caching\n"
+        "    from dpm import _lean_numba\n"
+        "    lean = caching.Cache.load_overload is _lean_numba._load_cached\n"
+        "    print(gc.isenabled(), lean, 'cffi' in sys.modules, 'scipy.linalg' in sys.modules)\n"
         "    return 0\n"
         "cli.render_main = main\n"
         "cli.render_command()\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "False False False", out.stdout + out.stderr
+    assert out.stdout.strip() == "False True False False", out.stdout + out.stderr

@@ -52,6 +52,7 @@ from typing import Any, ClassVar
 import numpy as np
 from tqdm import tqdm
 
+from dpm import collector
 from dpm.camera import Camera
 from dpm.caustic import forward as caustic_forward
 from dpm.caustic.stats import CausticStats
@@ -449,6 +450,7 @@ class Passes:
                         self.grid if self.plan.caustics != "off" else None,
                         self.deadline is not None or self.o.spp > ADAPT_AFTER,
                     )  # fmt: skip
+            collector.resume()  # the kernels and the denoiser are loaded: see dpm.collector
             self.begun += time.monotonic() - once
         self.spp += self.k
         self.half_spp[self.j % 2] += self.k
