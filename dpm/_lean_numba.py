@@ -11,15 +11,16 @@ the process:
   must compile still gets them: Numba's compiler refreshes both contexts itself before it
   starts. On the 2-core host (AMD EPYC, Zen 5) the refresh took 0.065 s of a 2-s render's
   start, and a warm render never compiles.
-- **a refresh, or a cache load, happens with two optional imports made to fail**: `numba.np.arraymath` imports
+- **a refresh, or a cache load, runs with two optional imports made to fail** (a kernel's
+  environment imports the Numba modules it took code from): `numba.np.arraymath` imports
   `scipy.linalg` to see whether BLAS is there (for `np.dot` and `np.linalg` in kernels, which
   dpm's do not use), and `numba.core.typing.cffi_utils` builds a `cffi.FFI()` (cffi is
-  installed for pyoidn), which parses C with pycparser: together 0.17 s of a cold start. The
-  imports themselves are restored at once, so scipy.linalg and cffi import as usual afterwards
-  (pyoidn, scipy.spatial). What stays: Numba's `_HAVE_BLAS` flag reads False (`np.convolve`
-  and `np.correlate` in kernels take a plain loop; `np.dot` and `np.linalg` still find BLAS
-  when first compiled) and kernels cannot call cffi functions. Where the two were imported
-  already, nothing is blocked.
+  installed for pyoidn), which parses C with pycparser: together 0.17 s of a cold start, and
+  scipy.linalg alone 0.07 s of a warm one. The imports themselves are restored at once, so
+  scipy.linalg and cffi import as usual afterwards (pyoidn, scipy.spatial). What stays:
+  Numba's `_HAVE_BLAS` flag reads False (`np.convolve` and `np.correlate` in kernels take a
+  plain loop; `np.dot` and `np.linalg` still find BLAS when first compiled) and kernels cannot
+  call cffi functions. Where the two were imported already, nothing is blocked.
 
 Only the `dpm-render` console script calls it, first thing: its process runs no other code.
 """
