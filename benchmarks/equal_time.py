@@ -37,7 +37,7 @@ from hybrid import reference, reference_noise
 from common import RESULTS, SCENES, cpu, linear_fit, markdown_table, passes_text, secant_spp
 from dpm import load_scene
 from dpm.io import linear_to_srgb8, read_exr
-from dpm.methods.auto import has_specular
+from dpm.methods.auto import CLEAN_GUIDE_PATHS, has_specular
 from dpm.metrics import rmse
 from dpm.validation.mitsuba import mitsuba_scene
 
@@ -51,7 +51,8 @@ CALIBRATION_SPP = (4, 32)
 
 # The Mitsuba child's common part (argv: desc.json, spp, variant, out, seed, ...): the scene
 # description with the aov integrator (color, albedo, normal) at `spp` samples per pixel, and
-# `denoise(out)`: (plain color, OIDN-denoised color) of a render's (H, W, 9) output.
+# `denoise(out, paths)`: (plain color, OIDN-denoised color) of a render's (H, W, 9) output of
+# `paths` samples per pixel, the guides counted as clean where auto would count them.
 MITSUBA_PRELUDE = r"""
 import json, sys
 import numpy as np
@@ -68,19 +69,33 @@ desc["integrator"] = {"type": "aov", "aovs": "albedo:albedo,nn:sh_normal",
                       "integrator": {"type": "path"}}
 
 
-def denoise(out):
+def _bsdfs(node):
+    if isinstance(node, dict):
+        for key, value in node.items():
+            if key == "bsdf" and isinstance(value, dict):
+                yield value["type"]
+            yield from _bsdfs(value)
+
+
+# no mirror or glass: the guides count as clean from CLEAN_PATHS (auto's rule, the same call)
+DIFFUSE_ONLY = set(_bsdfs(desc)) <= {"diffuse", "twosided"}
+
+
+def denoise(out, paths):
     out = np.asarray(out, dtype=np.float32)
     color = np.ascontiguousarray(np.maximum(np.nan_to_num(out[..., :3]), 0))
     albedo = np.ascontiguousarray(np.clip(out[..., 3:6], 0, 1))
     normal = np.ascontiguousarray(np.nan_to_num(out[..., 6:9]))
-    return color, pyoidn.denoise(color, albedo, normal, hdr=True, quality="high")
-"""
+    clean = DIFFUSE_ONLY and paths >= CLEAN_PATHS
+    return color, pyoidn.denoise(color, albedo, normal, hdr=True, clean_aux=clean,
+                                 quality="high")
+""".replace("CLEAN_PATHS", str(CLEAN_GUIDE_PATHS))
 
 MITSUBA_CHILD = (
     MITSUBA_PRELUDE
     + r"""
 out = np.array(mi.render(mi.load_dict(desc), spp=spp, seed=int(sys.argv[5])), dtype=np.float32)
-np.save(sys.argv[4], denoise(out)[1])
+np.save(sys.argv[4], denoise(out, spp)[1])
 """
 )
 

@@ -47,6 +47,7 @@ from unseen_references import OUT as REFERENCES  # noqa: E402
 from common import RESULTS, cpu, markdown_table, passes_text, save_records  # noqa: E402
 from dpm import load_scene  # noqa: E402
 from dpm.io import read_exr  # noqa: E402
+from dpm.methods.auto import CLEAN_GUIDE_PATHS, has_specular  # noqa: E402
 from dpm.metrics import rmse  # noqa: E402
 
 OUT = RESULTS / "equal_time_luxcore"
@@ -58,16 +59,18 @@ OVERRUN = 1.10  # LuxCore wall time / dpm's above which a row is marked
 
 
 def luxcore_run(
-    scene: Path, width: int, height: int, budget: float, reserve: float, seed: int, folder: Path
-) -> tuple[np.ndarray, np.ndarray, float, dict]:
+    scene: Path, width: int, height: int, budget: float, reserve: float, seed: int, folder: Path,
+    clean: tuple[str, ...] = (),
+) -> tuple[np.ndarray, np.ndarray, float, dict]:  # fmt: skip
     """(plain, OIDN-denoised, whole-process seconds, the child's stats) of a LuxCore render
-    time-boxed to `budget` seconds from its start, keeping `reserve` seconds for the end."""
+    time-boxed to `budget` seconds from its start, keeping `reserve` seconds for the end
+    (`clean`: the --clean-guides-from flag, where dpm's rule counts the guides as clean)."""
     plain, oidn = folder / "luxcore.npy", folder / "luxcore-oidn.npy"
     launch = time.monotonic()
     done = subprocess.run(
         [sys.executable, "-m", "dpm.validation.luxcore", str(scene), "--width", str(width),
          "--height", str(height), "--time", repr(budget), "--reserve", repr(reserve),
-         "--seed", str(seed), "-o", str(plain), "--denoised", str(oidn)],
+         "--seed", str(seed), "-o", str(plain), "--denoised", str(oidn), *clean],
         capture_output=True, text=True, check=True,
     )  # fmt: skip
     seconds = time.monotonic() - launch
@@ -89,10 +92,12 @@ def run_scene(name: str, times: list[float]) -> dict:
         dpm_run(path, width, height, max(times), 0, folder)  # warm Numba's cache, untimed
         *_, warm = luxcore_run(path, width, height, WARM_BUDGET, 0.3, 0, folder)
         reserve = warm["seconds_process"] - warm["seconds_rendered"] + 0.3
+        # OIDN told the guides are clean where auto would tell it (the same denoiser call)
+        clean = () if has_specular(scene) else ("--clean-guides-from", str(CLEAN_GUIDE_PATHS))
         for i, budget in enumerate(times):
             ours, ours_s, stats = dpm_run(path, width, height, budget, i + 1, folder)
             plain, oidn, theirs_s, info = luxcore_run(
-                path, width, height, ours_s, reserve, SEED_STRIDE * (i + 1), folder
+                path, width, height, ours_s, reserve, SEED_STRIDE * (i + 1), folder, clean
             )
             plain_rmse, oidn_rmse, ours_rmse = rmse(plain, ref), rmse(oidn, ref), rmse(ours, ref)
             rows.append({

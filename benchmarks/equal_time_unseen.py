@@ -111,7 +111,7 @@ while True:
     if time.monotonic() + batch + reserve > launch + budget:
         break
 rendered = time.monotonic()
-plain, oidn = denoise(total / len(batches))
+plain, oidn = denoise(total / len(batches), spp * len(batches))
 np.savez(sys.argv[4], plain=plain, oidn=oidn)
 saved = time.monotonic()
 info = {"spp": spp * len(batches), "batches": len(batches), "batch_seconds": batches,

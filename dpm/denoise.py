@@ -15,12 +15,16 @@ from dpm.tracer.visible import VisiblePoints
 RESTORE_Z = 2.0  # standard errors of a pixel's mean the denoiser may move it before undone
 
 
-def denoise(color: np.ndarray, albedo: np.ndarray, normal: np.ndarray) -> np.ndarray:
+def denoise(
+    color: np.ndarray, albedo: np.ndarray, normal: np.ndarray, clean_aux: bool = False
+) -> np.ndarray:
     """(H, W, 3) float32 linear RGB after OIDN's RT filter (HDR, high quality).
 
     color: (H, W, 3) linear RGB radiance; albedo: (H, W, 3) in [0, 1], the reflectance of
     the first diffuse surface each pixel sees; normal: (H, W, 3) world-space normals there
-    (zero where the pixel sees no surface).
+    (zero where the pixel sees no surface). clean_aux: the guides are free of noise (means
+    over enough paths), so OIDN follows their edges fully instead of guarding against their
+    noise (its `cleanAux`).
     """
     try:
         import pyoidn
@@ -30,7 +34,7 @@ def denoise(color: np.ndarray, albedo: np.ndarray, normal: np.ndarray) -> np.nda
         ) from None
     images = [np.ascontiguousarray(np.nan_to_num(a), np.float32) for a in (color, albedo, normal)]
     images[0] = np.maximum(images[0], 0.0)  # HDR input must be non-negative
-    return pyoidn.denoise(*images, hdr=True, quality="high")
+    return pyoidn.denoise(*images, hdr=True, clean_aux=clean_aux, quality="high")
 
 
 def restore_certain(

@@ -567,3 +567,26 @@ def test_stray_caustic_photons_leave_no_specks(tmp_path: Path) -> None:
     islands, n = label(image > 0)
     sizes = np.bincount(islands.ravel())[1:]
     assert n >= 1 and (sizes <= 15).sum() <= 2, sorted(sizes)[:20]
+
+
+@pytest.mark.parametrize(
+    ("scene", "spp", "clean"),
+    [("diffuse", 24, [True, True, True]), ("diffuse", 12, [True, False, False]),
+     ("glass", 16, [False])],
+)  # fmt: skip
+def test_the_guides_count_as_clean_from_enough_paths_without_glass(
+    scene, spp, clean, request, monkeypatch
+) -> None:
+    """The denoiser is told its guides are noise-free (OIDN's cleanAux) where each call's
+    guides average CLEAN_GUIDE_PATHS paths or more and no mirror or glass is in the scene:
+    the whole image and each half `denoiser_share` checks (passes of 1, 1, 2, 2, 4, 4, 8 and 2
+    paths: halves of 15 and 9; of 12 paths, 7 and 5)."""
+    calls = []
+
+    def recording(color, albedo, normal, clean_aux=False):
+        calls.append(clean_aux)
+        return color
+
+    monkeypatch.setattr(auto, "denoise", recording)
+    render(request.getfixturevalue(scene), options(spp=spp, seed=1))
+    assert calls == clean

@@ -16,9 +16,9 @@ ROOT = Path(__file__).parents[1] / "dpm"
 
 # Lowest first; a module may import its own layer and those below (docs/design.md).
 LAYERS = {
-    "core": ("dpm.errors", "dpm.clock", "dpm.stopwatch", "dpm.compiling", "dpm.io",
-             "dpm.metrics", "dpm.camera", "dpm.obj", "dpm.options", "dpm.scene",
-             "dpm.mitsuba_xml", "dpm.parallel", "dpm.filters", "dpm.textures"),
+    "core": ("dpm.errors", "dpm.clock", "dpm.collector", "dpm._lean_numba", "dpm.stopwatch",
+             "dpm.compiling", "dpm.io", "dpm.metrics", "dpm.camera", "dpm.obj", "dpm.options",
+             "dpm.scene", "dpm.mitsuba_xml", "dpm.parallel", "dpm.filters", "dpm.textures"),
     "tracer": ("dpm.tracer",),
     "density": ("dpm.density",),
     "nn": ("dpm.nn", "dpm.caustic", "dpm.nn.features", "dpm.nn.fused", "dpm.nn.infer",

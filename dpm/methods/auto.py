@@ -122,6 +122,15 @@ MIN_CAUSTIC_SHARE = 1e-3  # caustics under this share of the first pass's light 
 # a fixed 9 µs per pixel (the guess before) kept 1-1.5 s of a 512² render's budget idle.
 FINISH_SECONDS, WRITE_SECONDS_PER_PIXEL, FINISH_MARGIN, REST_CALLS = 0.03, 6e-7, 1.25, 1.5
 SQRT2 = np.sqrt(2.0)  # a half's standard error per pixel, in the whole image's
+# Paths per pixel from which the denoiser's guides count as free of noise (OIDN's cleanAux)
+# in a scene without mirrors or glass (its guides vary only with where a path enters the
+# pixel). Chosen on the examples (`auto --spp N`, 128², seeds 1-3, RMSE against the
+# equal-time references, OIDN as it was -> clean guides): the Cornell box at 1, 2, 4, 8, 16,
+# 64, 256 paths 0.732 -> 0.864, 0.663 -> 0.681, 0.573 -> 0.566, 0.286 -> 0.253, 0.103 ->
+# 0.096, 0.0230 -> 0.0218, 0.0116 -> 0.0112. Behind glass the guides stay noisy far longer
+# (the dragon at 2 and 8 paths +20 % and +2 %, the red wine +29 % and +11 %, mixed at 32
+# paths): there it is left off.
+CLEAN_GUIDE_PATHS = 8
 # The learned caustic filter's seconds per pixel on 2 cores (measured), and the most of a
 # --time budget it may take: past it the plan leaves it out.
 NETWORK_SECONDS_PER_PIXEL, NETWORK_SHARE = 4e-6, 0.15
@@ -648,7 +657,7 @@ class Passes:
         image = image.astype(np.float32).reshape(h, w, 3)
         if m.denoises(self.o):
             with self.watch("denoise"):
-                denoised = denoise(image, *self.guides())
+                denoised = denoise(image, *self.guides(), self.clean_guides(self.spp))
                 # A caustic's relative error is 1/√(photons in its disc), but of which value?
                 # Of its own, a caustic read low by chance (2 photons where 10 were due) looks
                 # certain and stays dark: where the disc holds photons, take what the
@@ -699,7 +708,8 @@ class Passes:
             fit = moved = 0.0
             for k, (a, b) in enumerate(((halves[0], halves[1]), (halves[1], halves[0]))):
                 # each half guided by its own passes only
-                x = restore_certain(a, denoise(a, *self.guides(k)), SQRT2 * error) - a
+                clean = self.clean_guides(self.half_spp[k])
+                x = restore_certain(a, denoise(a, *self.guides(k), clean), SQRT2 * error) - a
                 x, gap = x.astype(np.float64).ravel(), (b - a).astype(np.float64).ravel()
                 fit += float(x @ gap)
                 moved += float(x @ x)
@@ -727,6 +737,11 @@ class Passes:
         half = self.guide_sums[self.j % 2]
         half[0] += self.k * albedo.reshape(self.pixels, 3)
         half[1] += self.k * normal.reshape(self.pixels, 3)
+
+    def clean_guides(self, paths: int) -> bool:
+        """Whether guides averaged over `paths` paths per pixel count as noise-free for the
+        denoiser: from CLEAN_GUIDE_PATHS, where no mirror or glass is in the scene."""
+        return not self.separate and paths >= CLEAN_GUIDE_PATHS
 
     def guides(self, half: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The denoiser's (H, W, 3) albedo and normal guides: the means over the passes' paths,

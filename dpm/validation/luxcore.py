@@ -437,6 +437,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--caustic-radius", type=float, help="initial lookup radius (scene units)")
     p.add_argument("--denoised", type=Path, help="also write the OIDN-denoised image here")
     p.add_argument(
+        "--clean-guides-from", type=float, metavar="SPP",
+        help="tell OIDN the guides are noise-free (cleanAux) from this many samples per pixel"
+        " (default: never)",
+    )  # fmt: skip
+    p.add_argument(
         "--reserve",
         type=float,
         default=STOP_RESERVE,
@@ -468,8 +473,9 @@ def main(argv: list[str] | None = None) -> int:
         stats["seconds_rendered"] = time.monotonic() - started
         outputs = [(args.output, image[..., :3])]
         if args.denoised is not None:
+            clean = args.clean_guides_from is not None and stats["spp"] >= args.clean_guides_from
             outputs.append(
-                (args.denoised, denoise(image[..., :3], image[..., 3:6], image[..., 6:]))
+                (args.denoised, denoise(image[..., :3], image[..., 3:6], image[..., 6:], clean))
             )
         for path, picture in outputs:
             if path.suffix.lower() == ".npy":
