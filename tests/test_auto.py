@@ -133,18 +133,21 @@ def test_the_denoisers_call_is_timed_on_a_quarter_and_scaled_to_the_image(monkey
     clock = FakeClock(0.0)
     calls = []
 
-    def slow(color, albedo, normal):
-        calls.append(color.shape)
+    def slow(color, albedo, normal, clean_aux=False):
+        calls.append((color.shape, clean_aux))
         clock.now += 1e-3 * color.shape[0] * color.shape[1]
         return color
 
     monkeypatch.setattr(auto, "time", clock)
     monkeypatch.setattr(auto, "denoise", slow)
     passes = SimpleNamespace(
-        h=16, w=24, pixels=384, k=1, paths=auto.Halves(16, 24), guide_sums=np.ones((2, 2, 384, 3))
-    )
+        h=16, w=24, pixels=384, k=1, paths=auto.Halves(16, 24), guide_sums=np.ones((2, 2, 384, 3)),
+        clean_guides=lambda paths: paths >= auto.CLEAN_GUIDE_PATHS,  # (no mirror or glass)
+    )  # fmt: skip
     assert auto.Passes.time_denoiser(passes) == pytest.approx(0.384)
-    assert calls == [(8, 12, 3), (8, 12, 3)]
+    # timed as the finish will call it: with clean guides (the slower filter), not the first
+    # pass's one path
+    assert calls == [((8, 12, 3), True), ((8, 12, 3), True)]
 
 
 def test_a_budgeted_render_is_reproduced_by_its_pass_count(glass, monkeypatch) -> None:
@@ -282,7 +285,7 @@ def test_noisy_caustics_go_through_the_denoiser_and_known_ones_keep_their_estima
     # A denoiser that darkens every pixel by half. After two passes no pixel's error is known
     # (one sample per half), so its output is kept, caustics included; after many passes a
     # caustic pixel known to within a few percent moved by half is given back its own value.
-    monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal: color * 0.5)
+    monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal, clean=False: color * 0.5)
     for spp, kept in ((2, True), (48, False)):
         full, plain, caustic = three_renders(glass, spp=spp, seed=1)
         light = luminance(caustic)
@@ -302,7 +305,7 @@ def test_a_caustic_read_low_by_chance_is_not_taken_for_certain(glass, monkeypatc
     # (2 photons where 10 were due) would look certain and keep its dark reading against
     # the denoiser (the dark specks in a water caustic). Scaled by what the denoiser leaves
     # the caustic, a few photons do not overrule it; with many, the pixel is given back.
-    monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal: color * 4.0)
+    monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal, clean=False: color * 4.0)
     for spp, photons, most in ((4, 2_000, False), (48, 200_000, True)):
         full, plain, caustic = three_renders(glass, spp=spp, seed=1, photons=photons)
         light = luminance(caustic)
@@ -316,7 +319,7 @@ def test_a_pixel_with_no_caustic_is_judged_by_its_paths(glass, monkeypatch) -> N
     # Lit pixels the caustic does not reach: their caustic neither knows nor hides anything,
     # so after many passes the denoiser's quadrupling is undone wherever the paths' own error
     # rules it out (a caustic error scaled by what the denoiser leaves would excuse it).
-    monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal: color * 4.0)
+    monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal, clean=False: color * 4.0)
     full, plain, caustic = three_renders(glass, spp=48, seed=1)
     light = luminance(plain)
     dark = (luminance(caustic) < 0.01 * light) & (light > 0.05 * light.max())
@@ -332,7 +335,7 @@ def test_without_mirror_or_glass_the_denoisers_errors_are_given_back_too(
     # "error unknown" everywhere, which kept every denoised pixel, the light's edge blurred
     # into the ceiling included (the Cornell box had 3-7 times the raw image's error). The
     # check that may skip the denoiser is held to "it pays", so that the restore is tested.
-    monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal: color * 4.0)
+    monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal, clean=False: color * 4.0)
     monkeypatch.setattr(auto.Passes, "denoiser_share", lambda self, error: 1.0)
     full = render(diffuse, options(spp=48, seed=1)).image
     plain = render(diffuse, options(spp=48, seed=1, denoise=False)).image
@@ -352,11 +355,11 @@ def test_the_denoisers_share_is_what_the_halves_show_it_earns(
     # truth than the plain mean); one that adds to the noise none: the plain mean exactly.
     converged = render(diffuse, options(spp=4096, seed=9, denoise=False)).image
     plain = render(diffuse, options(spp=64, seed=2, denoise=False))
-    monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal: converged)
+    monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal, clean=False: converged)
     good = render(diffuse, options(spp=64, seed=2))
     assert good.stats["denoised"] and good.stats["denoiser_share"] > 0.9
 
-    def flat(color, albedo, normal):
+    def flat(color, albedo, normal, clean=False):
         return np.broadcast_to(color.mean((0, 1)), color.shape)
 
     monkeypatch.setattr(auto, "denoise", flat)
@@ -366,14 +369,14 @@ def test_the_denoisers_share_is_what_the_halves_show_it_earns(
     assert rmse(blend.image, converged) <= 1.001 * rmse(plain.image, converged)
     assert rmse(blend.image, converged) < rmse(flattened, converged)
     # one that returns the converged image 10 % too bright earns part of the share
-    monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal: 1.1 * converged)
+    monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal, clean=False: 1.1 * converged)
     biased = render(diffuse, options(spp=64, seed=2))
     assert 0 < biased.stats["denoiser_share"] < 1
     # one that moves nothing (or whose every move the restore undoes) leaves the image alone
-    monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal: color)
+    monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal, clean=False: color)
     idle = render(diffuse, options(spp=64, seed=1))
     assert idle.stats["denoiser_share"] == 1 and idle.stats["denoised"]
-    noisier = lambda color, albedo, normal: color + 3.0 * (color - converged)  # noqa: E731
+    noisier = lambda color, albedo, normal, clean=False: color + 3.0 * (color - converged)  # noqa: E731
     monkeypatch.setattr(auto, "denoise", noisier)
     late = render(diffuse, options(spp=64, seed=2))
     assert not late.stats["denoised"] and late.stats["denoiser_share"] == 0
@@ -386,7 +389,7 @@ def test_the_denoisers_share_is_what_the_halves_show_it_earns(
         argv = [str(scene), "--spp", "64", "-o", str(tmp_path / "o.exr"), *flags]
         assert render_main(argv) == 0
         assert ("not denoised" in capsys.readouterr().out) == said
-    monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal: 1.1 * converged)
+    monkeypatch.setattr(auto, "denoise", lambda color, albedo, normal, clean=False: 1.1 * converged)
     assert render_main([str(scene), "--spp", "64", "-o", str(tmp_path / "o.exr")]) == 0
     assert "denoised image weighted 0." in capsys.readouterr().out
 
@@ -409,7 +412,7 @@ def test_light_seen_in_glass_that_every_sample_finds_skips_the_denoiser(
     assert squares[0] / 64 == pytest.approx(luma**2, rel=0.005)  # no spread: known exactly
     seen = []
 
-    def wipe(color, albedo, normal):
+    def wipe(color, albedo, normal, clean=False):
         seen.append(color.copy())
         return np.zeros_like(color)
 
