@@ -13,8 +13,8 @@ example scene (default the ring; its caustic photons of M emitted paths, seed 0)
   next block of points is gathered), each the best of 5 tries after compilation (as many
   as each matmul of the peak gets), the rows trying in turn, round after round;
 - achieved GFLOP/s (executed FLOPs over the network's seconds) and its fraction of the peak:
-  the best fp32 matmul rate JAX reaches here in the same run (n×n by n×n, with XLA's own dots
-  and with its experimental YNNPACK dots, whichever is faster);
+  the best fp32 matmul rate here in the same run (n×n by n×n: JAX with XLA's own dots and
+  with its experimental YNNPACK dots, and NumPy's BLAS, whichever is fastest);
 - the same for the network's four 32×32 dense layers alone (bias and ReLU; no gathers,
   features, pooling or output), feature-major, in steps of as many photon rows as the
   network's steps hold at most, BLOCKS_IN_FLIGHT calls at once, as `predict_points` runs
@@ -25,8 +25,9 @@ nothing.
 
 The fused kernel is compiled for the vector width of Numba's target (`fused.LANES`: 16
 floats with AVX-512, else 8), named in the table. To measure AVX2 code on an AVX-512 host, run
-with NUMBA_CPU_NAME=haswell, NUMBA_CPU_FEATURES set to Haswell's features with -avx512f, and
-XLA_FLAGS=--xla_cpu_max_isa=AVX2 (the peak then is AVX2's too).
+with NUMBA_CPU_NAME=haswell, NUMBA_CPU_FEATURES set to Haswell's features with -avx512f,
+XLA_FLAGS=--xla_cpu_max_isa=AVX2 and OPENBLAS_CORETYPE=Haswell: the peak then is NumPy's
+OpenBLAS with its AVX2 kernels alone (XLA's dots ignore the cap; see `peak_gflops`).
 """
 
 from __future__ import annotations
@@ -58,7 +59,8 @@ from dpm.nn.weights import load_weights, shipped_weights
 from dpm.tracer import build_bvh, trace_photons, trace_visible_points
 
 KS = (50, 500)
-TARGET_VARIABLES = ("NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES", "XLA_FLAGS")  # code-generation targets
+# code-generation targets (and the BLAS kernels of the AVX2 peak)
+TARGET_VARIABLES = ("NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES", "XLA_FLAGS", "OPENBLAS_CORETYPE")
 POINTS = (65_536, 262_144)
 # XLA's experimental YNNPACK dots: the peak is the better of these and XLA's own
 YNN_DOTS = {"xla_cpu_experimental_ynn_fusion_type": "LIBRARY_FUSION_TYPE_DOT"}
@@ -82,10 +84,36 @@ def flops_per_point(params: dict, k: int) -> tuple[int, int]:
     return written - k * context + context, written
 
 
-def peak_gflops(sizes: tuple[int, ...], rounds: int) -> float:
-    """The best fp32 n×n matmul GFLOP/s of JAX here, with XLA's dots and with YNNPACK's
-    (where this jaxlib knows the experimental option)."""
+def host_has_avx512() -> bool:
+    """Whether this CPU has AVX-512F (whatever Numba and XLA are told to compile for)."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            return "avx512f" in f.read().split()
+    except OSError:
+        return False
+
+
+def numpy_gflops(sizes: tuple[int, ...], rounds: int) -> float:
+    """The best fp32 n×n matmul GFLOP/s of NumPy's BLAS here."""
     best = 0.0
+    for n in sizes:
+        a = np.random.default_rng(0).random((n, n), np.float32)
+        best = max(best, 2 * n**3 / best_of(lambda a=a: a @ a, rounds) / 1e9)
+    return best
+
+
+def peak_gflops(sizes: tuple[int, ...], rounds: int) -> tuple[float, str]:
+    """(GFLOP/s, source) of the best fp32 n×n matmul here: JAX with XLA's dots and with
+    YNNPACK's (where this jaxlib knows the experimental option) and NumPy's BLAS. For AVX2
+    code on an AVX-512 host, NumPy's alone, run with OPENBLAS_CORETYPE=Haswell: XLA's dots
+    pick their kernels by the CPU, not by --xla_cpu_max_isa (on Zen 5, 479-485 GFLOP/s with
+    the AVX2 cap and 474-497 without), so they would hold AVX2 code to AVX-512's peak."""
+    if LANES == 8 and host_has_avx512():
+        if os.environ.get("OPENBLAS_CORETYPE", "").lower() != "haswell":
+            sys.exit("inference.py: AVX2 code on an AVX-512 host needs OPENBLAS_CORETYPE=Haswell "
+                     "(the AVX2 peak is NumPy's BLAS with its AVX2 kernels)")  # fmt: skip
+        return numpy_gflops(sizes, rounds), "NumPy's OpenBLAS, Haswell (AVX2) kernels"
+    best, source = numpy_gflops(sizes, rounds), "NumPy's BLAS"
     for options in ({}, YNN_DOTS):
         for n in sizes:
             a = jnp.asarray(np.random.default_rng(0).random((n, n)), jnp.float32)
@@ -94,8 +122,10 @@ def peak_gflops(sizes: tuple[int, ...], rounds: int) -> float:
                 seconds = best_of(lambda mm=mm, a=a: jax.block_until_ready(mm(a)), rounds)
             except Exception:  # an unknown option or value: XLA's own dots only
                 continue
-            best = max(best, 2 * n**3 / seconds / 1e9)
-    return best
+            rate = 2 * n**3 / seconds / 1e9
+            if rate > best:
+                best, source = rate, "JAX" + (", YNNPACK dots" if options else "")
+    return best, source
 
 
 def layers_alone(params: dict, rows: int, rounds: int) -> float:
@@ -194,8 +224,9 @@ def gather_only(index: PhotonIndex, position: np.ndarray, normal: np.ndarray, k:
         pass
 
 
-def report(rows: list[dict], peak: float, alone: float, name: str) -> list[str]:
-    """The markdown lines of the results (alone: GFLOP/s of the dense layers alone)."""
+def report(rows: list[dict], peak: float, source: str, alone: float, name: str) -> list[str]:
+    """The markdown lines of the results (peak: GFLOP/s of `source`'s best matmul; alone:
+    GFLOP/s of the dense layers alone)."""
     head = ["model", "points", "FLOPs/point executed", "as written", "network s", "gather s",
             "GFLOP/s", "fraction of peak"]  # fmt: skip
     body = [[f"DPM-{r['k']}", f"{r['points']:,}", f"{r['executed']:,}", f"{r['written']:,}",
@@ -203,7 +234,7 @@ def report(rows: list[dict], peak: float, alone: float, name: str) -> list[str]:
              f"{r['gflops'] / peak:.2f}"] for r in rows]  # fmt: skip
     return [
         f"Scene: {name}, caustic photons of M = {M:,} emitted paths (seed 0). "
-        f"Peak: {peak:.0f} GFLOP/s (best fp32 matmul in JAX, same run).",
+        f"Peak: {peak:.0f} GFLOP/s (best fp32 matmul, {source}, same run).",
         "",
         *markdown_table(head, body),
         "",
@@ -228,11 +259,11 @@ def main() -> None:
     args = parser.parse_args()
     # as many tries for the network as for the peak: best-of-N favours the one with more
     points, rounds, sizes = ((4096,), 1, (512,)) if args.quick else (POINTS, 5, (1024, 2048))
-    peak = peak_gflops(sizes, max(rounds, 3))
+    peak, source = peak_gflops(sizes, max(rounds, 3))
     rows = measure(args.scene, points, rounds)
     params = load_weights(shipped_weights(KS[0])).params
     alone = layers_alone(params, points[0] * KS[0], max(rounds, 3))
-    lines = report(rows, peak, alone, args.scene)
+    lines = report(rows, peak, source, alone, args.scene)
     print("\n".join(lines))
     print(f"fraction of peak: {min(r['gflops'] for r in rows) / peak:.2f}")
     if not args.quick:

@@ -8,7 +8,9 @@ features in the point's canonical frame, runs the network and forms Eq. 2. The n
 tile of TILE photons' activations (photon-major rows of WIDTH floats) through the layers in L1,
 each layer a register-blocked micro-kernel (`_block_codegen`: PHOTONS photons × WIDTH outputs
 held in vector accumulators, unrolled over the inputs; the last hidden layer ends in the output
-dot), and pools each point's photons in one pass (`_pool`). It serves the shipped architecture
+dot), pools each point's photons in one pass (`_pool`) and forms the points' context
+(Dense_0's pooled half) in the same blocks; the features' frame (`_frame`) and Eq. 2's
+softplus (`softplus`, no libm calls) run in vectors too. It serves the shipped architecture
 (9 input channels, width 32; `supports`). One call is single-threaded and a point's result
 depends on its own photons alone, so the output does not depend on how calls are spread over
 threads. Its sums run in another order than XLA's: equal within float rounding (tested).
@@ -118,12 +120,12 @@ def _vector_at(builder, data, at):
     return builder.bitcast(builder.gep(data, [at]), vf.as_pointer())
 
 
-def _block_codegen(n_in: int, head: bool):
+def _block_codegen(n_in: int, head: bool, relu: bool = True):
     """LLVM IR of one micro-kernel block: for photons p < PHOTONS, output row
     y[y0 + p, :] = ReLU(init[owner[o0 + p], :] + Σ_i x[x0 + p·xp + i·xi] · w[i, :]), float32,
-    with fused multiply-adds. Photon-major rows of WIDTH floats; x has any strides. With
-    `head`, y is 1-D and gets y[y0 + p] = row · head (the last argument, WIDTH floats) instead,
-    summed as a fixed pairwise tree."""
+    with fused multiply-adds (without `relu`, no ReLU). Photon-major rows of WIDTH floats; x
+    has any strides. With `head`, y is 1-D and gets y[y0 + p] = row · head (the last
+    argument, WIDTH floats) instead, summed as a fixed pairwise tree."""
 
     def codegen(context, builder, sig, args):
         f32, i32, i64 = ir.FloatType(), ir.IntType(32), ir.IntType(64)
@@ -166,8 +168,9 @@ def _block_codegen(n_in: int, head: bool):
                     product = builder.fmul(xs, ws[v], flags=["contract"])
                     acc[p][v] = builder.fadd(product, acc[p][v], flags=["contract"])
         zero = ir.Constant(vf, [0.0] * LANES)
-        acc = [[builder.select(builder.fcmp_ordered(">", a, zero), a, zero) for a in row]
-               for row in acc]  # fmt: skip
+        if relu:
+            acc = [[builder.select(builder.fcmp_ordered(">", a, zero), a, zero) for a in row]
+                   for row in acc]  # fmt: skip
         if head:
             last = context.make_array(sig.args[10])(context, builder, args[10])
             hs = [
@@ -199,8 +202,9 @@ def _block_codegen(n_in: int, head: bool):
     return codegen
 
 
-def _make_block(n_in: int, head: bool = False):
-    """The micro-kernel intrinsic for n_in inputs, ReLU, and with `head` the output dot."""
+def _make_block(n_in: int, head: bool = False, relu: bool = True):
+    """The micro-kernel intrinsic for n_in inputs, ReLU (unless not `relu`), and with `head`
+    the output dot."""
     if head:
 
         def block(typingctx, w, init, owner, x, y, o0, x0, xp, xi, y0, last):
@@ -210,15 +214,16 @@ def _make_block(n_in: int, head: bool = False):
 
         def block(typingctx, w, init, owner, x, y, o0, x0, xp, xi, y0):
             sig = types.void(w, init, owner, x, y, o0, x0, xp, xi, y0)
-            return sig, _block_codegen(n_in, False)
+            return sig, _block_codegen(n_in, False, relu)
 
-    block.__name__ = f"_block_{n_in}{'_head' if head else ''}"
+    block.__name__ = f"_block_{n_in}{'_head' if head else ''}{'' if relu else '_linear'}"
     return intrinsic(block)
 
 
 _first_block = _make_block(CHANNELS)
 _hidden_block = _make_block(WIDTH)
 _head_block = _make_block(WIDTH, head=True)
+_context_block = _make_block(2 * WIDTH, relu=False)  # Dense_0's pooled half, once per point
 
 
 def _pool_codegen(context, builder, sig, args):
@@ -272,6 +277,40 @@ def _pool(typingctx, features, valid, point, pooled):
     return types.void(features, valid, point, pooled), _pool_codegen
 
 
+def _frame_codegen(context, builder, sig, args):
+    """LLVM IR of `_frame`: LANES columns a step, the rows as vectors."""
+    i64 = ir.IntType(64)
+    x, coef = (context.make_array(sig.args[i])(context, builder, args[i]) for i in (0, 3))
+    first, steps = (context.cast(builder, args[i], sig.args[i], types.int64) for i in (1, 2))
+    stride = builder.extract_value(x.shape, 1)  # floats between rows
+    c = [_splat(builder, builder.load(builder.gep(coef.data, [ir.Constant(i64, i)])))
+         for i in range(10)]  # fmt: skip
+    with cgutils.for_range(builder, steps, intp=i64) as loop:
+        col = builder.add(first, builder.mul(loop.index, ir.Constant(i64, LANES)))
+        at = [builder.add(builder.mul(stride, ir.Constant(i64, r)), col) for r in range(6)]
+        v = [builder.load(_vector_at(builder, x.data, a), align=4) for a in at]
+
+        def dot(w, a, b, d):  # w·(a, b, d) in the order of the scalar loop: (w0a + w1b) + w2d
+            return builder.fadd(builder.fadd(builder.fmul(c[w], a), builder.fmul(c[w + 1], b)),
+                                builder.fmul(c[w + 2], d))  # fmt: skip
+
+        out = [builder.fmul(dot(w, *v[:3]), c[9]) for w in (0, 3, 6)]
+        out += [dot(w, *v[3:]) for w in (0, 3, 6)]
+        for a, value in zip(at, out, strict=True):
+            builder.store(value, _vector_at(builder, x.data, a), align=4)
+    return context.get_dummy_value()
+
+
+@intrinsic
+def _frame(typingctx, x, first, steps, coef):
+    """Rows 0-5 of x (CHANNELS, N) at columns first ... first + steps·LANES - 1 (offsets o,
+    directions d) into a point's frame: rows 0-2 (f0·o, f1·o, n·o)·inv_r, rows 3-5 (f0·d,
+    f1·d, n·d), from coef = (f0, f1, n, inv_r) (10 float32): the scalar loop's operations
+    on LANES columns at once (LLVM's vectorizer left that loop scalar: six rows of one array
+    read and written, more than its alias checks allow)."""
+    return types.void(x, first, steps, coef), _frame_codegen
+
+
 @nb.njit(cache=True, inline="always")
 def _layer_first(w, b, x, y, x0, xi, zero_rows):
     """y[:TILE] = relu(w · x + b) on TILE photons of feature-major x (photon x0 + p at
@@ -310,8 +349,9 @@ def logits_kernel(x, valid, packed, out):
     padded = tiles * TILE
     zero_rows = np.zeros(TILE, np.int64)  # every photon's init row is row 0: the bias
     owner = np.empty(padded, np.int64)  # each photon's point (the last for the padding)
-    for j in range(padded):
-        owner[j] = min(j, total - 1) // k
+    for point in range(n):  # (no division per photon: 4 % of the kernel at K = 50)
+        owner[point * k : (point + 1) * k] = point
+    owner[total:] = n - 1
     features = np.empty((padded, WIDTH), np.float32)  # the extractor's output, photon-major
     tile_in = np.zeros((CHANNELS, TILE), np.float32)
     a = np.empty((TILE, WIDTH), np.float32)
@@ -331,17 +371,17 @@ def logits_kernel(x, valid, packed, out):
         _layer(e1w, e1b, zero_rows, 0, a, 0, c, 0)
         _layer(e2w, e2b, zero_rows, 0, c, 0, features, start)
     # 2: each point's context, Dense_0's pooled half: max and mean over its valid photons
-    # (`_pool`), then its pooled half of Dense_0, once per point (the loop over outputs
-    # innermost, contiguous, so it vectorizes)
-    pooled = np.empty(2 * WIDTH, np.float32)
-    context = np.empty((n, WIDTH), np.float32)
+    # (`_pool`), then its pooled half of Dense_0 (no ReLU), once per point, PHOTONS points a
+    # block (a loop per point took a fifth of the kernel's time at K = 50)
+    blocks = -(-n // PHOTONS) * PHOTONS
+    pooled = np.zeros((blocks, 2 * WIDTH), np.float32)
+    context = np.empty((blocks, WIDTH), np.float32)
     for point in range(n):
-        _pool(features, valid, point, pooled)
-        for o in range(WIDTH):
-            context[point, o] = d0b[o]
-        for i in range(2 * WIDTH):
-            for o in range(WIDTH):
-                context[point, o] += d0w[WIDTH + i, o] * pooled[i]
+        _pool(features, valid, point, pooled[point])
+    bias = d0b.reshape(1, WIDTH)
+    for p in range(0, blocks, PHOTONS):
+        _context_block(d0w[WIDTH:], bias, zero_rows, pooled, context, 0, p * 2 * WIDTH,
+                       2 * WIDTH, 1, p)  # fmt: skip
     # 3: the predictor, tile by tile: relu(own · feature + context) → ReLU layer → logit
     logit = np.empty(TILE, np.float32)
     for t in range(tiles):
@@ -351,6 +391,37 @@ def logits_kernel(x, valid, packed, out):
             _head_block(d1w, d1b, zero_rows, a, logit, 0, p * WIDTH, WIDTH, 1, p, d2w)
         for j in range(min(TILE, total - start)):
             out[start + j] = logit[j] + d2b
+
+
+_LN2 = 0.6931471805599453
+_EXP_TERMS = (1.0, 1.0, 1 / 2, 1 / 6, 1 / 24, 1 / 120, 1 / 720, 1 / 5040)  # e^x to x^7
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def softplus(u):
+    """log(1 + e^u) (float32) within 1e-7 of itself, relative, from float64 arithmetic
+    alone: no libm calls, so a loop of it vectorizes (two scalar calls a photon cost as
+    much as a fifth of its network). e^-|u| = 2^m · e^x (m = round(-|u|/ln 2), |x| ≤ ln 2 / 2,
+    Taylor to x^7) and log(1 + t) = 2 atanh(t / (2 + t)) (its series to the 13th power:
+    t / (2 + t) ≤ 1/3)."""
+    a = -min(abs(np.float64(u)), 700.0)
+    m = np.floor(a / _LN2 + 0.5)  # -1010 ≤ m ≤ 0
+    x = a - m * _LN2
+    e = _EXP_TERMS[7]
+    for c in _EXP_TERMS[6::-1]:
+        e = e * x + c
+    b, p = -np.int64(m), 1.0  # 2^m = ∏ over the bits of -m: exact products of powers of 2
+    half = 0.5
+    for _ in range(10):
+        p = p * (half if b & 1 else 1.0)
+        b, half = b >> 1, half * half
+    t = e * p
+    s = t / (2.0 + t)
+    s2 = s * s
+    series = 1 / 13
+    for c in (1 / 11, 1 / 9, 1 / 7, 1 / 5, 1 / 3, 1.0):
+        series = series * s2 + c
+    return np.float32(max(np.float64(u), 0.0) + 2.0 * s * series)
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -366,6 +437,7 @@ def radiance_kernel(rows, index, hi, lo, normal, albedo, radius, angle, packed, 
     out[:] = 0.0
     x = np.empty((CHANNELS, n * k), np.float32)
     valid = np.empty((n, k), np.float32)
+    coef = np.empty(10, np.float32)  # a point's frame for `_frame`
     for point in range(n):
         first = point * k
         nx, ny, nz = normal[point, 0], normal[point, 1], normal[point, 2]
@@ -381,41 +453,56 @@ def radiance_kernel(rows, index, hi, lo, normal, albedo, radius, angle, packed, 
             valid[point, j] = 1.0 if agree else 0.0
             if agree:
                 cx, cy, cz = cx + ox, cy + oy, cz + oz
-            x[0, first + j], x[1, first + j], x[2, first + j] = ox, oy, oz
+            col = first + j  # the row's other inputs too: the frame's pass reads no rows
+            x[0, col], x[1, col], x[2, col] = ox, oy, oz
+            x[3, col], x[4, col], x[5, col] = rows[i, 3], rows[i, 4], rows[i, 5]
+            x[6, col], x[7, col], x[8, col] = rows[i, 12], rows[i, 13], rows[i, 14]
         tx, ty, tz, sx, sy, sz = orthonormal_basis(nx, ny, nz)  # `local_frame` at angle 0
         t, s = (tx, ty, tz), (sx, sy, sz)
         turn = angle[point]
-        if np.isnan(turn):  # the canonical angle: the first tangent towards the mean offset
-            turn = np.arctan2(cx * s[0] + cy * s[1] + cz * s[2], cx * t[0] + cy * t[1] + cz * t[2])
-        c, si = np.cos(turn), np.sin(turn)
+        if np.isnan(turn):  # the canonical angle: the first tangent towards the mean offset,
+            # (cos, sin) of atan2(v, u) as (u, v) / |(u, v)| (atan2(±0, ±0) is 0 or ±π, so
+            # cos ±1: the points without a valid photon, whose estimate is zero anyway)
+            u = cx * t[0] + cy * t[1] + cz * t[2]
+            v = cx * s[0] + cy * s[1] + cz * s[2]
+            h = np.sqrt(u * u + v * v)
+            c, si = (u / h, v / h) if h > 0 else (np.copysign(np.float32(1.0), u), v * 0)
+        else:
+            c, si = np.cos(turn), np.sin(turn)
         f0 = (c * t[0] + si * s[0], c * t[1] + si * s[1], c * t[2] + si * s[2])
         f1 = (-si * t[0] + c * s[0], -si * t[1] + c * s[1], -si * t[2] + c * s[2])
         inv_r = np.float32(1.0) / max(radius[point], min_radius)
-        for j in range(k):
-            col, i = first + j, min(index[point, j], last)
+        coef[0], coef[1], coef[2], coef[3], coef[4] = f0[0], f0[1], f0[2], f1[0], f1[1]
+        coef[5], coef[6], coef[7], coef[8], coef[9] = f1[2], nx, ny, nz, inv_r
+        steps = k // LANES
+        _frame(x, first, steps, coef)
+        for col in range(first + steps * LANES, first + k):  # the rest, one by one
             ox, oy, oz = x[0, col], x[1, col], x[2, col]
-            dx, dy, dz = rows[i, 3], rows[i, 4], rows[i, 5]
+            dx, dy, dz = x[3, col], x[4, col], x[5, col]
             x[0, col] = (f0[0] * ox + f0[1] * oy + f0[2] * oz) * inv_r
             x[1, col] = (f1[0] * ox + f1[1] * oy + f1[2] * oz) * inv_r
             x[2, col] = (nx * ox + ny * oy + nz * oz) * inv_r
             x[3, col] = f0[0] * dx + f0[1] * dy + f0[2] * dz
             x[4, col] = f1[0] * dx + f1[1] * dy + f1[2] * dz
             x[5, col] = nx * dx + ny * dy + nz * dz
-            x[6, col], x[7, col], x[8, col] = rows[i, 12], rows[i, 13], rows[i, 14]
     z = np.empty(n * k, np.float32)
     logits_kernel(x, valid, packed, z)
+    weight = np.empty(k, np.float32)
     for point in range(n):  # Eq. 2 with weights softplus(z + SHIFT) on the valid photons
-        total = np.zeros(3, np.float32)
+        first = point * k
+        for j in range(k):  # (no calls: vectorized)
+            weight[j] = softplus(z[first + j] + shift) * valid[point, j]
+        tr = tg = tb = np.float32(0.0)
         for j in range(k):
-            if valid[point, j] > 0:
-                u = z[point * k + j] + shift
-                w = max(u, np.float32(0.0)) + np.log1p(np.exp(-abs(u)))
-                i = min(index[point, j], last)
-                for ch in range(3):
-                    total[ch] += w * rows[i, 6 + ch]
+            i = min(index[point, j], last)
+            tr += weight[j] * rows[i, 6]
+            tg += weight[j] * rows[i, 7]
+            tb += weight[j] * rows[i, 8]
         r = max(radius[point], min_radius)
-        for ch in range(3):
-            out[point, ch] = albedo[point, ch] / np.pi * total[ch] / (np.pi * r * r)
+        scale = np.float32(1.0 / (np.pi * np.pi)) / (r * r)
+        out[point, 0] = albedo[point, 0] * tr * scale
+        out[point, 1] = albedo[point, 1] * tg * scale
+        out[point, 2] = albedo[point, 2] * tb * scale
 
 
 # --- the XLA FFI handler: raw call-frame access (offsets of c_api.h's structs on 64-bit) ---
