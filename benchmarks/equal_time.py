@@ -69,16 +69,9 @@ desc["integrator"] = {"type": "aov", "aovs": "albedo:albedo,nn:sh_normal",
                       "integrator": {"type": "path"}}
 
 
-def _bsdfs(node):
-    if isinstance(node, dict):
-        for key, value in node.items():
-            if key == "bsdf" and isinstance(value, dict):
-                yield value["type"]
-            yield from _bsdfs(value)
-
-
-# no mirror or glass: the guides count as clean from CLEAN_PATHS (auto's rule, the same call)
-DIFFUSE_ONLY = set(_bsdfs(desc)) <= {"diffuse", "twosided"}
+# no mirror or glass (auto's `has_specular`, from the parent): the guides count as clean
+# from CLEAN_PATHS (auto's rule, the same call)
+DIFFUSE_ONLY = desc.pop("dpm_diffuse_only")
 
 
 def denoise(out, paths):
@@ -108,14 +101,16 @@ def wall(command: list[str]) -> float:
 
 
 def mitsuba_setup(scene, camera, folder: Path, child: str = MITSUBA_CHILD) -> Path:
-    """Convert the scene for the Mitsuba child (untimed): PLY files and desc.json; the
-    child's script (`child`) as child.py beside it."""
+    """Convert the scene for the Mitsuba child (untimed): PLY files and desc.json (with
+    whether the scene is diffuse only, for the child's denoiser call); the child's script
+    (`child`) as child.py beside it."""
     desc = mitsuba_scene(scene, camera, 1, folder)
     c = camera
     desc["sensor"]["look_at"] = {
         "origin": c.origin.tolist(), "target": c.target.tolist(), "up": c.up.tolist()
     }  # fmt: skip
     del desc["sensor"]["to_world"]
+    desc["dpm_diffuse_only"] = not has_specular(scene)  # the child pops it (`denoise`)
     path = folder / "desc.json"
     path.write_text(json.dumps(desc))
     (folder / "child.py").write_text(child)
