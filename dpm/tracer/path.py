@@ -125,7 +125,8 @@ def shade_path(
         wx, wy, wz = qx - px, qy - py, qz - pz
         dist = math.sqrt(wx * wx + wy * wy + wz * wz)
         if dist > 0 and area_pdf > 0:
-            wx, wy, wz = wx / dist, wy / dist, wz / dist
+            inv = 1.0 / dist  # (one division: each sits in the path's chain of latencies)
+            wx, wy, wz = wx * inv, wy * inv, wz * inv
             cos_x = wx * nx + wy * ny + wz * nz
             lx, ly, lz = sc.normals[lt, 0], sc.normals[lt, 1], sc.normals[lt, 2]
             cos_l = -(wx * lx + wy * ly + wz * lz)
@@ -134,7 +135,10 @@ def shade_path(
                 qx + eps * lx, qy + eps * ly, qz + eps * lz, stack,
             ):  # fmt: skip
                 pdf_l = light_pdf_solid_angle(sc, lt, dist, cos_l)
-                g = inv_pi * cos_x / pdf_l * _power2(pdf_l, cos_x * inv_pi)
+                # BSDF·cos / pdf_l times the power heuristic's weight, in one division:
+                # (cos/π) / p · p² / (p² + b²) with b = cos/π, the BSDF sampling's density
+                b = cos_x * inv_pi
+                g = b * pdf_l / (pdf_l * pdf_l + b * b)
                 e = sc.emission[sc.material[lt]]
                 lr += br * e[0] * g
                 lg += bg * e[1] * g
