@@ -44,10 +44,9 @@ PM_KS = (50, 500)  # the K of the paper's PM baselines
 TOTAL = "total"  # timed_estimate's key for the wall seconds of the whole call
 
 
-def cpu() -> str:
-    """This machine's CPU (/proc/cpuinfo's model name, family and model where there is one:
-    a virtual machine may hide the rest of the name), cores and widest vector extension."""
-    info = {}
+def cpu_info() -> dict[str, str]:
+    """/proc/cpuinfo's fields of the first CPU (empty where there is none)."""
+    info: dict[str, str] = {}
     try:
         with open("/proc/cpuinfo") as f:
             for line in f:
@@ -55,6 +54,13 @@ def cpu() -> str:
                 info.setdefault(key.strip(), value.strip())
     except OSError:
         pass
+    return info
+
+
+def cpu() -> str:
+    """This machine's CPU (/proc/cpuinfo's model name, family and model where there is one:
+    a virtual machine may hide the rest of the name), cores and widest vector extension."""
+    info = cpu_info()
     name = info.get("model name") or platform.processor() or platform.machine()
     model = [f"{k} {info[k]}" for k in ("cpu family", "model") if k in info]
     flags = set(info.get("flags", "").split())

@@ -45,7 +45,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from common import RESULTS, SCENES, M, cpu, markdown_table
+from common import RESULTS, SCENES, M, cpu, cpu_info, markdown_table
 from dpm import load_scene
 from dpm.density.gather import PhotonIndex
 from dpm.nn.fused import LANES
@@ -84,15 +84,6 @@ def flops_per_point(params: dict, k: int) -> tuple[int, int]:
     return written - k * context + context, written
 
 
-def host_has_avx512() -> bool:
-    """Whether this CPU has AVX-512F (whatever Numba and XLA are told to compile for)."""
-    try:
-        with open("/proc/cpuinfo") as f:
-            return "avx512f" in f.read().split()
-    except OSError:
-        return False
-
-
 def numpy_gflops(sizes: tuple[int, ...], rounds: int) -> float:
     """The best fp32 n×n matmul GFLOP/s of NumPy's BLAS here."""
     best = 0.0
@@ -108,7 +99,8 @@ def peak_gflops(sizes: tuple[int, ...], rounds: int) -> tuple[float, str]:
     code on an AVX-512 host, NumPy's alone, run with OPENBLAS_CORETYPE=Haswell: XLA's dots
     pick their kernels by the CPU, not by --xla_cpu_max_isa (on Zen 5, 479-485 GFLOP/s with
     the AVX2 cap and 474-497 without), so they would hold AVX2 code to AVX-512's peak."""
-    if LANES == 8 and host_has_avx512():
+    # (the host's own flags, whatever Numba and XLA are told to compile for)
+    if LANES == 8 and "avx512f" in cpu_info().get("flags", "").split():
         if os.environ.get("OPENBLAS_CORETYPE", "").lower() != "haswell":
             sys.exit("inference.py: AVX2 code on an AVX-512 host needs OPENBLAS_CORETYPE=Haswell "
                      "(the AVX2 peak is NumPy's BLAS with its AVX2 kernels)")  # fmt: skip
