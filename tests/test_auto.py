@@ -114,7 +114,7 @@ def test_the_budget_stops_before_the_pass_that_would_overrun_it(glass, monkeypat
     # successor would end past the budget less the finishing reserve.
     # (the denoiser's call is timed after the first pass: here 0.05 s, with no clock read)
     monkeypatch.setattr(auto, "time", FakeClock(0.1))
-    monkeypatch.setattr(auto.Passes, "time_denoiser", lambda self: 0.05)
+    monkeypatch.setattr(auto.Passes, "time_denoiser", lambda self: (0.05, 0.05))
     budget = 2.0
     calls = 1  # a scene with glass: no `denoiser_share`, one denoiser call to come
     finish = auto.FINISH_SECONDS + auto.WRITE_SECONDS_PER_PIXEL * 24 * 16
@@ -127,15 +127,16 @@ def test_the_budget_stops_before_the_pass_that_would_overrun_it(glass, monkeypat
 
 
 def test_the_denoisers_call_is_timed_on_a_quarter_and_scaled_to_the_image(monkeypatch) -> None:
-    # A stand-in denoiser that takes 1 ms per pixel of the fake clock, and nothing else
-    # moves it: the first call (OIDN's loading) is not counted, the second, on a quarter of
-    # the 24 x 16 image, is scaled by four.
+    # A stand-in denoiser that takes 1 ms per pixel of the fake clock without clean guides
+    # and 2 ms with, and nothing else moves it: each filter's first call (OIDN's loading, the
+    # filter's set-up) is not counted, the second, on a quarter of the 24 x 16 image, is
+    # scaled by four.
     clock = FakeClock(0.0)
     calls = []
 
     def slow(color, albedo, normal, clean_aux=False):
         calls.append((color.shape, clean_aux))
-        clock.now += 1e-3 * color.shape[0] * color.shape[1]
+        clock.now += (1 + clean_aux) * 1e-3 * color.shape[0] * color.shape[1]
         return color
 
     monkeypatch.setattr(auto, "time", clock)
@@ -144,15 +145,56 @@ def test_the_denoisers_call_is_timed_on_a_quarter_and_scaled_to_the_image(monkey
         h=16, w=24, pixels=384, k=1, paths=auto.Halves(16, 24), guide_sums=np.ones((2, 2, 384, 3)),
         clean_guides=lambda paths: paths >= auto.CLEAN_GUIDE_PATHS,  # (no mirror or glass)
     )  # fmt: skip
-    assert auto.Passes.time_denoiser(passes) == pytest.approx(0.384)
-    # timed as the finish will call it: with clean guides (the slower filter), not the first
-    # pass's one path
-    assert calls == [((8, 12, 3), True), ((8, 12, 3), True)]
+    assert auto.Passes.time_denoiser(passes) == pytest.approx((0.384, 0.768))
+    # both filters the finish may call: without clean guides (few paths) and with
+    assert calls == [((8, 12, 3), False)] * 2 + [((8, 12, 3), True)] * 2
+    # where the guides never count as clean (mirrors or glass) only the first
+    calls.clear()
+    passes.clean_guides = lambda paths: False
+    assert auto.Passes.time_denoiser(passes) == pytest.approx((0.384, 0.384))
+    assert calls == [((8, 12, 3), False)] * 2
+
+
+def test_the_finish_reserve_counts_the_calls_the_finish_will_make() -> None:
+    # Without mirrors or glass the finish denoises once, with clean guides from
+    # CLEAN_GUIDE_PATHS paths, and judges the denoiser's share (two calls more, each half
+    # with its own guides) once each half has ADAPT_AFTER / 2 paths: a render that stops
+    # sooner must not keep time for calls it will not make.
+    from dpm.methods.adaptive import ADAPT_AFTER
+
+    passes = SimpleNamespace(
+        denoising=True, separate=False, call=(0.1, 0.3), finish_seconds=0.5, spp=0,
+        half_spp=[0, 0], j=0, clean_guides=lambda paths: paths >= auto.CLEAN_GUIDE_PATHS,
+    )  # fmt: skip
+
+    def reserve(spp, half, j, k=0):
+        passes.spp, passes.half_spp, passes.j = spp, list(half), j
+        return (auto.Passes.finish_reserve(passes, k) - 0.5) / auto.FINISH_MARGIN
+
+    rest = auto.REST_CALLS * 0.1
+    assert reserve(1, (1, 0), 1) == pytest.approx(0.1 + rest)  # one pass: one plain call
+    half = ADAPT_AFTER // 2
+    assert reserve(2 * half - 1, (half, half - 1), 1) == pytest.approx(0.1 + rest)
+    # the coming pass (pass 1, of half 1) would complete the second half: three calls
+    three = reserve(2 * half - 1, (half, half - 1), 1, k=1)
+    clean = (
+        2 * half >= auto.CLEAN_GUIDE_PATHS,
+        half >= auto.CLEAN_GUIDE_PATHS,
+        half >= auto.CLEAN_GUIDE_PATHS,
+    )
+    assert three == pytest.approx(sum(0.3 if c else 0.1 for c in clean) + rest)
+    many = auto.CLEAN_GUIDE_PATHS
+    assert reserve(2 * many, (many, many), 0) == pytest.approx(3 * 0.3 + rest)
+    passes.separate = True  # mirrors or glass: one call, never with clean guides
+    passes.clean_guides = lambda paths: False
+    assert reserve(2 * many, (many, many), 0) == pytest.approx(0.1 + rest)
+    passes.denoising = False
+    assert auto.Passes.finish_reserve(passes) == 0.5
 
 
 def test_a_budgeted_render_is_reproduced_by_its_pass_count(glass, monkeypatch) -> None:
     monkeypatch.setattr(auto, "time", FakeClock(0.1))
-    monkeypatch.setattr(auto.Passes, "time_denoiser", lambda self: 0.01)  # (no clock read)
+    monkeypatch.setattr(auto.Passes, "time_denoiser", lambda self: (0.01, 0.01))  # (no clock)
     timed = render(glass, options(time=1.0, seed=4), started=0.0)
     plan = timed.stats["plan"]
     assert plan["caustics"] == "sppm" and timed.stats["caustic_photons"] > 0
@@ -200,7 +242,7 @@ def test_a_budgeted_render_of_whole_pixels_is_reproduced_by_its_paths(diffuse, m
     # Every pass takes 0.1 s on this clock whatever its paths, so the budget's last pass is
     # cut to what the time left holds; --spp of the render's paths makes the same passes.
     monkeypatch.setattr(auto, "time", FakeClock(0.1))
-    monkeypatch.setattr(auto.Passes, "time_denoiser", lambda self: 0.01)  # (no clock read)
+    monkeypatch.setattr(auto.Passes, "time_denoiser", lambda self: (0.01, 0.01))  # (no clock)
     timed = render(diffuse, options(time=1.7, seed=4), started=0.0)
     assert timed.stats["spp"] > timed.stats["passes"] > 1
     again = render(diffuse, options(spp=timed.stats["spp"], seed=4))

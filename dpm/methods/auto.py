@@ -115,11 +115,13 @@ PASS_SAMPLES = 1 << 17
 MIN_CAUSTIC_SHARE = 1e-3  # caustics under this share of the first pass's light are left out
 # Seconds kept for what follows the last pass: a fixed part, per pixel for writing (EXR and
 # PNG: 0.15 s at 512²) and, where the image is denoised, FINISH_MARGIN times the denoiser
-# calls to come (one; two more where `Passes.denoiser_share` runs) and the rest of the finish
-# (restore, error maps: REST_CALLS calls' worth), at what one call takes on this machine now
-# (`Passes.time_denoiser`, after the first pass). Measured on the idle 2-core host: OIDN
-# 0.63-0.72 µs per pixel, 2.3 times that beside two busy processes, the rest 0.9-1.4 µs;
-# a fixed 9 µs per pixel (the guess before) kept 1-1.5 s of a 512² render's budget idle.
+# calls to come (one; two more where `Passes.denoiser_share` will run) and the rest of the
+# finish (restore, error maps: REST_CALLS calls' worth of the faster filter), at what a call
+# takes on this machine now (`Passes.time_denoiser`, after the first pass;
+# `Passes.finish_reserve`). Measured on the idle 2-core host: OIDN 0.63-0.72 µs per pixel,
+# 2.3 times that beside two busy processes, the rest 0.9-1.4 µs (Zen 4; on Zen 5 0.4 µs at
+# 512², 0.75 of a call without clean guides); a fixed 9 µs per pixel (the guess before) kept
+# 1-1.5 s of a 512² render's budget idle.
 FINISH_SECONDS, WRITE_SECONDS_PER_PIXEL, FINISH_MARGIN, REST_CALLS = 0.03, 6e-7, 1.25, 1.5
 SQRT2 = np.sqrt(2.0)  # a half's standard error per pixel, in the whole image's
 # Paths per pixel from which the denoiser's guides count as free of noise (OIDN's cleanAux)
@@ -387,10 +389,10 @@ class Passes:
         self.guide_sums = np.zeros((2, 2, self.pixels, 3))
         self.deadline = None if o.time is None else started + o.time
         self.separate = has_specular(scene)  # the light seen apart from the paths: see below
-        denoising = self.full and method.denoises(o)
-        # the denoiser calls to come after the last pass (`denoiser_share` may run two more),
-        # reserved for once they are timed (`time_denoiser`)
-        self.calls = denoising * (1 + 2 * (not self.separate))
+        self.denoising = self.full and method.denoises(o)
+        # seconds a denoiser call takes, without and with clean guides (`time_denoiser`)
+        self.call = (0.0, 0.0)
+        # the finish's part that does not depend on when the render stops (`finish_reserve`)
         self.finish_seconds = FINISH_SECONDS + WRITE_SECONDS_PER_PIXEL * self.pixels
         # Photon paths per pass: without a budget, --photons shared by the --spp passes; with
         # one, --photons-per-pass or the plan's (the first pass already uses it, so a --time
@@ -447,10 +449,9 @@ class Passes:
             once = time.monotonic()
             if self.plan is None:
                 self.make_plan()
-            if self.deadline is not None and self.calls:
+            if self.deadline is not None and self.denoising:
                 with self.watch("denoise"):
-                    call = self.time_denoiser()
-                self.finish_seconds += FINISH_MARGIN * (self.calls + REST_CALLS) * call
+                    self.call = self.time_denoiser()
             if self.full and (self.deadline is not None or self.o.spp > 1):
                 with self.watch("kernels"):
                     warm_later_kernels(
@@ -467,20 +468,24 @@ class Passes:
         self.grid_radius *= np.sqrt((self.j + ALPHA) / (self.j + 1))  # Knaus & Zwicker, Eq. 17
         self.bar.update(self.k)
 
-    def time_denoiser(self) -> float:
-        """Seconds one denoiser call on the whole image takes on this machine now: four times
-        a call on a quarter of the first pass's image, after one that loads OIDN (which the
-        finish then need not), with clean guides where the scene allows them."""
+    def time_denoiser(self) -> tuple[float, float]:
+        """Seconds one denoiser call on the whole image takes on this machine now, without
+        and with clean guides (the slower filter: 0.35 against 0.15 s at 512²): four times a
+        call on a quarter of the first pass's image, each after one that sets its filter up
+        (and, the first, loads OIDN, which the finish then need not). Where the guides never
+        count as clean (mirrors or glass) only the first is timed."""
         h, w = max(1, self.h // 2), max(1, self.w // 2)
         image = self.paths.mean().reshape(self.h, self.w, 3)[:h, :w].astype(np.float32)
         albedo, normal = (g.reshape(self.h, self.w, 3)[:h, :w] / self.k for g in self.guide_sums[0])
-        # timed as the finish will call it: with clean guides where the scene allows them
-        # (a render of fewer paths calls the faster filter: 10 against 23 ms at 128²)
-        clean = self.clean_guides(CLEAN_GUIDE_PATHS)
-        denoise(image, albedo, normal, clean)
-        begun = time.monotonic()
-        denoise(image, albedo, normal, clean)
-        return (time.monotonic() - begun) * self.pixels / (h * w)
+        seconds = []
+        for clean in (False, True)[: 1 + self.clean_guides(CLEAN_GUIDE_PATHS)]:
+            # a first call with a filter sets it up (0.02-0.03 s; the very first also loads
+            # OIDN), which the finish's calls repeat only where their filters alternate
+            denoise(image, albedo, normal, clean)
+            begun = time.monotonic()
+            denoise(image, albedo, normal, clean)
+            seconds.append((time.monotonic() - begun) * self.pixels / (h * w))
+        return seconds[0], seconds[-1]
 
     def pass_paths(self) -> int:
         """Camera paths per pixel the next pass is planned to take: one, or where passes take
@@ -612,6 +617,24 @@ class Passes:
                     )
                     self.finish_seconds += NETWORK_SECONDS_PER_PIXEL * self.pixels
 
+    def finish_reserve(self, k: int = 0) -> float:
+        """Seconds to keep for the finish were the render to stop after a pass of k more
+        paths per pixel (0: now): its fixed part, and FINISH_MARGIN times the timed call for
+        each denoiser call it would make (with the filter it would use) and for the rest
+        (REST_CALLS of the faster filter's call). The denoiser runs
+        once, and twice more where `denoiser_share` will judge it (no mirror or glass, and
+        each half with ADAPT_AFTER / 2 paths): counting those two from the first pass kept
+        a 512² render at `--time 2` to one pass, ended at 1.2 s."""
+        if not self.denoising:
+            return self.finish_seconds
+        half = list(self.half_spp)
+        half[self.j % 2] += k  # (the coming pass is pass j, of half j mod 2)
+        clean = [self.clean_guides(self.spp + k)]  # each call's filter (`denoise`'s clean_aux)
+        if not self.separate and 2 * min(half) >= ADAPT_AFTER:
+            clean += [self.clean_guides(paths) for paths in half]
+        seconds = sum(self.call[c] for c in clean) + REST_CALLS * self.call[False]
+        return self.finish_seconds + FINISH_MARGIN * seconds
+
     def done(self) -> bool:
         """Whether to stop: --spp paths per pixel done, or the next pass would overrun the
         budget even at one path per pixel (a pass's time includes what runs between passes);
@@ -622,7 +645,7 @@ class Passes:
         if self.j == 1:  # could the budget hold one pass and the finishing?
             self.method.pass_seconds = last
             self.method.overran = (
-                self.deadline is not None and now + self.finish_seconds > self.deadline
+                self.deadline is not None and now + self.finish_reserve() > self.deadline
             )
         k = self.pass_paths()
         if self.deadline is None:
@@ -636,7 +659,7 @@ class Passes:
         per_path = max(last, 1e-9) / (self.k + 1)
         if self.adapts() and not self.adapted:
             per_path *= 1 + EXTRA_PER_PIXEL
-        self.k = min(k, int((self.deadline - self.finish_seconds - now) / per_path) - 1)
+        self.k = min(k, int((self.deadline - self.finish_reserve(k) - now) / per_path) - 1)
         self.cut = self.k < k
         return self.k < 1
 
