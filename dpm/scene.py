@@ -140,6 +140,12 @@ class Scene:
         pdf[e.triangles] = pick / self.areas[e.triangles].astype(np.float64)
         return pdf
 
+    @cached_property
+    def all_diffuse(self) -> bool:
+        """Whether every triangle is diffuse (no mirror or glass: no light path has a
+        caustic, and paths need no specular chains)."""
+        return bool(np.all(self.materials.kind[np.unique(self.material)] == DIFFUSE))
+
     @property
     def extent(self) -> float:
         """Length of the bounding box diagonal (scene units)."""

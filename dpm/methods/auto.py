@@ -66,7 +66,7 @@ from dpm.filters import box_mean
 from dpm.methods.adaptive import ADAPT_AFTER, EXTRA_CAP, EXTRA_PER_PIXEL, Halves
 from dpm.methods.base import Method, check_photons
 from dpm.options import RenderOptions
-from dpm.scene import DIFFUSE, Scene
+from dpm.scene import Scene
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import (
     BVH,
@@ -179,8 +179,7 @@ def plan_network(
 
 def has_specular(scene: Scene) -> bool:
     """Whether any triangle is a mirror or glass (else no light path has a caustic)."""
-    kinds = scene.materials.kind[np.unique(scene.material)]
-    return bool(np.any(kinds != DIFFUSE))
+    return not scene.all_diffuse
 
 
 def make_plan(

@@ -399,9 +399,17 @@ def _pixels(
     (P,) sum of squared luminances, visible points found, non-finite samples dropped."""
     row0, row1 = rows
     pixels = (row1 - row0) * camera.width
+    qseed, first = (-1, 0) if sequence is None else sequence
+    if scene.all_diffuse:  # the same sums, traced in stages (`dpm.tracer.wavefront`)
+        tasks = np.arange(row0 * camera.width, row1 * camera.width, dtype=np.int64)
+        sums = _wavefront(
+            scene, bvh, camera, tasks, np.zeros(pixels, np.int64), np.full(pixels, spp),
+            np.full(pixels, first, np.int64), spp, seed, qseed, True,
+        )  # fmt: skip
+        image, albedo, normal = (sums[:, c : c + 3] / spp for c in (0, 3, 6))
+        return image, albedo, normal, sums[:, 11], int(sums[:, 9].sum()), int(sums[:, 10].sum())
     image, albedo, normal = (np.empty((pixels, 3)) for _ in range(3))
     square = np.empty(pixels)
-    qseed, first = (-1, 0) if sequence is None else sequence
     hits, bad = pixels_kernel(
         bvh.arrays, bvh.depth, scene.kernel_arrays(), camera.basis(), camera.width,
         camera.height, row0, row1, spp, seed, qseed, first, spawn_offset(scene), caustics,
@@ -465,6 +473,14 @@ def trace_listed(
     task_out, task_sq = np.zeros((len(owner), 3)), np.zeros(len(owner))
     qseed, done = (-1, np.zeros(len(pixels), np.int64)) if sequence is None else sequence
     qfirst = np.asarray(done, np.int64)[owner] + first
+    if scene.all_diffuse and grid is None:  # in stages (`dpm.tracer.wavefront`)
+        sums = _wavefront(
+            scene, bvh, camera, pixels[owner], first, task_counts, qfirst, int(counts.max()),
+            seed, qseed, emission,
+        )  # fmt: skip
+        np.add.at(out, owner, sums[:, :3])
+        np.add.at(sq, owner, sums[:, 11])
+        return out, sq, int(sums[:, 10].sum())
     bad = listed_kernel(
         bvh.arrays, bvh.depth, scene.kernel_arrays(), camera.basis(), camera.width,
         camera.height, pixels[owner], first, task_counts, int(counts.max()), seed, qseed,
@@ -473,3 +489,34 @@ def trace_listed(
     np.add.at(out, owner, task_out)
     np.add.at(sq, owner, task_sq)
     return out, sq, int(bad)
+
+
+def _wavefront(
+    scene: Scene,
+    bvh: BVH,
+    camera: Camera,
+    pixels: np.ndarray,
+    firsts: np.ndarray,
+    counts: np.ndarray,
+    qfirsts: np.ndarray,
+    stride: int,
+    seed: int,
+    sequence: int,
+    emission: bool,
+) -> np.ndarray:
+    """(L, 12) float64 `path_pixel`'s sums for each task (pixels (L,), streams pixel·stride
+    + firsts + 0 … counts-1, sequence points qfirsts + 0 …) of a scene without mirrors or
+    glass, by `dpm.tracer.wavefront`: radiance (3), albedo (3) and normal (3) sums, visible
+    points, non-finite samples, sum of squared luminances."""
+    from dpm.tracer.wavefront import batch_starts, wavefront_kernel  # (it imports this module)
+
+    pixels, firsts, counts, qfirsts = (
+        np.ascontiguousarray(a, np.int64) for a in (pixels, firsts, counts, qfirsts)
+    )
+    out = np.empty((len(pixels), 12))
+    wavefront_kernel(
+        bvh.arrays, bvh.depth, scene.kernel_arrays(), camera.basis(), camera.width,
+        camera.height, pixels, firsts, counts, qfirsts, stride, seed, sequence,
+        spawn_offset(scene), emission, batch_starts(counts, nb.get_num_threads()), out,
+    )  # fmt: skip
+    return out
