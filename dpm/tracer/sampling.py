@@ -81,9 +81,14 @@ def turn(u):
         1 / 362880 + a2 * (-1 / 39916800))))))  # fmt: skip
     c = 1.0 + a2 * (-0.5 + a2 * (1 / 24 + a2 * (-1 / 720 + a2 * (1 / 40320 + a2 * (
         -1 / 3628800 + a2 * (1 / 479001600))))))  # fmt: skip
-    q = np.int64(k) & 3
-    cos = c if q == 0 else (-s if q == 1 else (-c if q == 2 else s))
-    sin = s if q == 0 else (c if q == 1 else (-s if q == 2 else -c))
+    # k quarter turns (k = 4 is none) as selects on the float k: an integer chain of
+    # `q == 1 else ...` compiled to branches on a random quadrant, mispredicted half the time
+    # (10 ns a call, against 0.7 in a loop LLVM vectorizes; the values are the same)
+    odd = (k == 1.0) | (k == 3.0)
+    x = s if odd else c
+    y = c if odd else s
+    cos = -x if (k == 1.0) | (k == 2.0) else x
+    sin = -y if (k == 2.0) | (k == 3.0) else y
     return cos, sin
 
 
