@@ -100,7 +100,7 @@ def batch_paths(
     hit_t, hit_tri = np.empty(n), np.empty(n, np.int64)
     # the float64 state and scratch (`_run`), each its own allocation: LLVM vectorizes no
     # loop over rows of one 2-D array
-    rows = (
+    rows = (  # 56: see `_run`
         np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n),
         np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n),
         np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n),
@@ -109,7 +109,6 @@ def batch_paths(
         np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n),
         np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n),
         np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n),
-        np.empty(n), np.empty(n),
     )  # fmt: skip
     per_path = np.zeros((n, 13))  # each path's terms (`_path_terms`)
     _run(
@@ -137,7 +136,7 @@ def _run(
     bvh, stack, sc, cam, width, height, pixels, firsts, counts, qfirsts, stride, seed,
     sequence, eps, emission, ids, pseq, go, test, hit_t, hit_tri, rows, per_path,
 ):  # fmt: skip
-    """The batch's paths from the camera to their ends; per_path (N, 12) gets each path's
+    """The batch's paths from the camera to their ends; per_path (N, 13) gets each path's
     radiance, guides, hit, non-finite flag and squared luminance (`path_pixel`'s terms)."""
     pid, stream, index, vertex = ids
     ox, oy, oz, dx, dy, dz = rows[0:6]  # the ray
