@@ -31,16 +31,17 @@ from dpm.tracer.surface import albedo_at, next_surface
 from dpm.tracer.traverse import any_hit, new_stack, spawn_offset
 from dpm.tracer.visible import (
     LUMINANCE,
+    MAX_VERTICES,
     RR_SPECULAR,
+    RR_START,
+    RR_SURVIVAL,
     SCATTER,
     SHADE_DIM0,
     VisiblePoints,
     camera_sample,
 )
+from dpm.tracer.wavefront import batch_starts, wavefront_kernel
 
-MAX_VERTICES = 256  # path vertices after the visible point; Russian roulette ends most sooner
-RR_START = 3  # vertices before Russian roulette may end a path
-RR_SURVIVAL = 0.95  # the most likely survival of Russian roulette at a diffuse vertex
 DIMS_PER_VERTEX = 8  # Fresnel, light pick, light point (2), direction (2), roulette, spare
 SAMPLES_PER_TASK = 64
 # Vertices after the visible point whose light sample and direction come from the pixel's
@@ -508,8 +509,6 @@ def _wavefront(
     + firsts + 0 … counts-1, sequence points qfirsts + 0 …) of a scene without mirrors or
     glass, by `dpm.tracer.wavefront`: radiance (3), albedo (3) and normal (3) sums, visible
     points, non-finite samples, sum of squared luminances."""
-    from dpm.tracer.wavefront import batch_starts, wavefront_kernel  # (it imports this module)
-
     pixels, firsts, counts, qfirsts = (
         np.ascontiguousarray(a, np.int64) for a in (pixels, firsts, counts, qfirsts)
     )

@@ -39,6 +39,10 @@ from dpm.tracer.traverse import hit_triangle, new_stack, ray_setup, spawn_offset
 # light seen through the egg); 1024 loses nothing more than 4096 does, at about 2 % more time.
 MAX_SPECULAR_DEPTH = 1024
 RR_SPECULAR = 16  # specular vertices before Russian roulette may end a path (also for photons)
+# Path tracing from the visible point (`dpm.tracer.path`, `dpm.tracer.wavefront`):
+MAX_VERTICES = 256  # path vertices after the visible point; Russian roulette ends most sooner
+RR_START = 3  # vertices before Russian roulette may end a path
+RR_SURVIVAL = 0.95  # the most likely survival of Russian roulette at a diffuse vertex
 SHADE_DIM0 = 2 + 2 * MAX_SPECULAR_DEPTH
 LUMINANCE = (0.2126, 0.7152, 0.0722)  # Rec. 709 weights (dpm.density.base.luminance too)
 

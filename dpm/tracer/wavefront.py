@@ -26,7 +26,6 @@ import math
 import numba as nb
 import numpy as np
 
-from dpm.tracer.path import MAX_VERTICES, RR_START, RR_SURVIVAL
 from dpm.tracer.sampling import (
     pixel_sequence,
     sample_cdf,
@@ -36,7 +35,14 @@ from dpm.tracer.sampling import (
 )
 from dpm.tracer.surface import albedo_at
 from dpm.tracer.traverse import any_hit, closest_hit, new_stack
-from dpm.tracer.visible import LUMINANCE, SHADE_DIM0, camera_ray
+from dpm.tracer.visible import (
+    LUMINANCE,
+    MAX_VERTICES,
+    RR_START,
+    RR_SURVIVAL,
+    SHADE_DIM0,
+    camera_ray,
+)
 
 # The most paths of one batch: some 70 float64 each, 0.6 MB, which stays in a Zen 5 core's
 # 1 MB L2 (the diffuse room, 128², 64 spp: 4.1-4.3 M samples/s at 1024-2048 paths, 3.0 at
