@@ -620,10 +620,10 @@ class Passes:
         """Seconds to keep for the finish were the render to stop after a pass of k more
         paths per pixel (0: now): its fixed part, and FINISH_MARGIN times the timed call for
         each denoiser call it would make (with the filter it would use) and for the rest
-        (REST_CALLS of the faster filter's call). The denoiser runs
-        once, and twice more where `denoiser_share` will judge it (no mirror or glass, and
-        each half with ADAPT_AFTER / 2 paths): counting those two from the first pass kept
-        a 512² render at `--time 2` to one pass, ended at 1.2 s."""
+        (REST_CALLS of the faster filter's call). The denoiser runs once, and twice more
+        where `denoiser_share` will judge it (no mirror or glass, and each half with
+        ADAPT_AFTER / 2 paths): counting those two from the first pass kept a 512² render
+        at `--time 2` to one pass, ended at 1.2 s."""
         if not self.denoising:
             return self.finish_seconds
         half = list(self.half_spp)

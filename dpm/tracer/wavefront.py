@@ -64,14 +64,23 @@ def batch_starts(counts: np.ndarray, threads: int) -> np.ndarray:
     paths each) go together up to a batch's size: BATCH paths, or fewer where that leaves
     each of `threads` threads fewer than MIN_BATCHES; a task of more paths goes alone."""
     size = min(BATCH, max(1, -(-int(counts.sum()) // (MIN_BATCHES * max(threads, 1)))))
-    starts, total = [0], 0
-    for i, c in enumerate(counts.tolist()):
-        if total and total + c > size:
-            starts.append(i)
+    return _greedy_starts(np.ascontiguousarray(counts, np.int64), size)
+
+
+@nb.njit(cache=True)
+def _greedy_starts(counts, size):
+    """`batch_starts` for a batch size: compiled, as a pass calls it on every pixel (a
+    Python loop took 2.8 ms a pass at 256²)."""
+    starts = np.empty(len(counts) + 1, np.int64)
+    starts[0], b, total = 0, 1, 0
+    for i in range(len(counts)):
+        if total and total + counts[i] > size:
+            starts[b] = i
+            b += 1
             total = 0
-        total += c
-    starts.append(len(counts))
-    return np.asarray(starts, np.int64)
+        total += counts[i]
+    starts[b] = len(counts)
+    return starts[: b + 1].copy()
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
