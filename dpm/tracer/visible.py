@@ -119,9 +119,15 @@ def camera_sample(bvh, sc, cam, width, height, x, y, sx, sy, stream, seed, eps, 
     followed through specular vertices to the first diffuse surface (decisions from
     dimensions 2 on). A miss has zero point, normal, albedo and throughput."""
     dx, dy, dz = camera_ray(cam, width, height, x + sx, y + sy)
-    tri, _, px, py, pz, nx, ny, nz, m, cos_i, front = next_surface(
-        bvh, sc, cam[0, 0], cam[0, 1], cam[0, 2], dx, dy, dz, stack
-    )
+    hit = next_surface(bvh, sc, cam[0, 0], cam[0, 1], cam[0, 2], dx, dy, dz, stack)
+    return camera_chain(bvh, sc, dx, dy, dz, hit, stream, seed, eps, stack)
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def camera_chain(bvh, sc, dx, dy, dz, hit, stream, seed, eps, stack):
+    """`camera_sample` from its camera ray's direction d and first hit (`next_surface`'s
+    tuple) on."""
+    tri, _, px, py, pz, nx, ny, nz, m, cos_i, front = hit
     tr = tg = tb = 1.0
     er = eg = eb = 0.0
     counted = False  # whether this hit's emission is already in e (a dielectric's split)
