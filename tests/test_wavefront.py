@@ -1,9 +1,7 @@
-"""The staged path tracer (`dpm.tracer.wavefront`) against `path_pixel` and `shade_path`.
+"""The staged path tracer of diffuse scenes (`dpm.tracer.wavefront`) against `path_pixel`.
 
 Both make the same decisions from the same random numbers in the same arithmetic, so their
-per-pixel sums must be equal to the bit, however the paths are batched: on a diffuse scene,
-through glass (camera chains with emission splitting, caustic paths left out or taken, a
-photon grid at the later diffuse vertices) and off a gold mirror.
+per-pixel sums must be equal to the bit, however the paths are batched.
 """
 
 from __future__ import annotations
@@ -15,36 +13,22 @@ import numpy as np
 import pytest
 from test_textures import textured_scene
 
-import dpm.tracer.path as path
 from dpm import load_scene
-from dpm.tracer import build_bvh, trace_photons
-from dpm.tracer.path import _wavefront, listed_kernel, pixels_kernel, shade, trace_listed
-from dpm.tracer.photon_grid import photon_grid
+from dpm.tracer import build_bvh
+from dpm.tracer.path import _wavefront, listed_kernel, pixels_kernel, trace_listed
 from dpm.tracer.traverse import spawn_offset
-from dpm.tracer.visible import trace_visible_points
 from dpm.tracer.wavefront import batch_starts
 
-SCENES = Path(__file__).parent.parent / "examples" / "scenes"
-
-
-def loaded(name, size):
-    scene = load_scene(SCENES / f"{name}.obj")
-    return scene, build_bvh(scene), scene.camera.with_resolution(size, size)
+CORNELL = Path(__file__).parent.parent / "examples" / "scenes" / "cornell_box.obj"
 
 
 @pytest.fixture(scope="module")
 def cornell():
-    return loaded("cornell_box", 24)
+    scene = load_scene(CORNELL)
+    return scene, build_bvh(scene), scene.camera.with_resolution(24, 24)
 
 
-@pytest.fixture(scope="module", params=["glass_egg", "ring"])
-def specular(request):
-    scene, bvh, camera = loaded(request.param, 20)
-    photons = trace_photons(scene, bvh, 20000, 1, caustic_only=True)
-    return scene, bvh, camera, photon_grid(photons, 0.05 * scene.extent)
-
-
-def megakernel_pixels(scene, bvh, camera, spp, seed, sequence, caustics=True):
+def megakernel_pixels(scene, bvh, camera, spp, seed, sequence):
     """`pixels_kernel`'s (P, 9) means of radiance, albedo and normal, (P,) sums of squared
     luminance, visible points and non-finite samples."""
     p = camera.width * camera.height
@@ -54,7 +38,7 @@ def megakernel_pixels(scene, bvh, camera, spp, seed, sequence, caustics=True):
     args = (camera.width, camera.height, 0, camera.height, spp, seed, qseed, first)
     hits, bad = pixels_kernel(
         bvh.arrays, bvh.depth, scene.kernel_arrays(), camera.basis(), *args,
-        spawn_offset(scene), caustics, image, albedo, normal, square,
+        spawn_offset(scene), True, image, albedo, normal, square,
     )  # fmt: skip
     return np.concatenate([image, albedo, normal], axis=1), square, hits, bad
 
@@ -68,7 +52,7 @@ def test_whole_pixels_equal_the_megakernels_to_the_bit(cornell, sequence) -> Non
     pixels = np.arange(p)
     staged = _wavefront(
         scene, bvh, camera, pixels, np.zeros(p), np.full(p, spp), np.full(p, sequence[1]),
-        spp, 3, sequence[0], True, True, None,
+        spp, 3, sequence[0], True,
     )  # fmt: skip
     np.testing.assert_array_equal(staged[:, :9] / spp, means)  # (as `trace_pixels` divides)
     np.testing.assert_array_equal(staged[:, 11], square)
@@ -91,9 +75,8 @@ def test_listed_paths_equal_the_megakernels_to_the_bit(cornell, emission) -> Non
             emission, None, out, sq,
         )  # fmt: skip
         staged = _wavefront(
-            scene, bvh, camera, pixels, firsts, counts, qfirsts, 31, 5, qseed, False, emission,
-            None,
-        )  # fmt: skip
+            scene, bvh, camera, pixels, firsts, counts, qfirsts, 31, 5, qseed, emission
+        )
         np.testing.assert_array_equal(staged[:, :3], out)
         np.testing.assert_array_equal(staged[:, 11], sq)
         assert staged[:, 10].sum() == bad
@@ -108,7 +91,7 @@ def test_a_textured_floor_equals_the_megakernel(tmp_path) -> None:
     p = camera.width * camera.height
     staged = _wavefront(
         scene, bvh, camera, np.arange(p), np.zeros(p), np.full(p, 4), np.zeros(p), 4, 9, -1,
-        True, True, None,
+        True,
     )  # fmt: skip
     np.testing.assert_array_equal(staged[:, :9] / 4, means)
     np.testing.assert_array_equal(staged[:, 11], square)
@@ -118,7 +101,7 @@ def test_a_textured_floor_equals_the_megakernel(tmp_path) -> None:
 def test_batches_and_threads_do_not_change_the_sums(cornell, monkeypatch) -> None:
     scene, bvh, camera = cornell
     p = camera.width * camera.height
-    args = (np.arange(p), np.zeros(p), np.full(p, 3), np.zeros(p), 3, 2, 4, True, True, None)
+    args = (np.arange(p), np.zeros(p), np.full(p, 3), np.zeros(p), 3, 2, 4, True)
     first = _wavefront(scene, bvh, camera, *args)
     import dpm.tracer.wavefront as wavefront
 
@@ -131,60 +114,14 @@ def test_batches_and_threads_do_not_change_the_sums(cornell, monkeypatch) -> Non
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
 
 
-@pytest.mark.parametrize("caustics", [True, False])
-def test_specular_chains_equal_the_megakernels_to_the_bit(specular, caustics) -> None:
-    scene, bvh, camera, _ = specular
-    assert not scene.all_diffuse
-    spp, p = 4, camera.width * camera.height
-    means, square, hits, bad = megakernel_pixels(scene, bvh, camera, spp, 3, (11, 2), caustics)
-    staged = _wavefront(
-        scene, bvh, camera, np.arange(p), np.zeros(p), np.full(p, spp), np.full(p, 2), spp, 3,
-        11, caustics, True, None,
-    )  # fmt: skip
-    np.testing.assert_array_equal(staged[:, :9] / spp, means)
-    np.testing.assert_array_equal(staged[:, 11], square)
-    assert staged[:, 9].sum() == hits and staged[:, 10].sum() == bad
-    assert means[:, :3].max() > 0
-
-
-@pytest.mark.parametrize("with_grid", [False, True])
-def test_listed_specular_paths_with_a_photon_grid_equal_the_megakernel(
-    specular, with_grid, monkeypatch
-) -> None:
-    scene, bvh, camera, grid = specular
-    grid = grid if with_grid else None
-    rng = np.random.default_rng(2)
-    pixels = rng.choice(camera.width * camera.height, 30, replace=False)
-    counts, done = rng.integers(1, 40, 30), rng.integers(0, 9, 30)
-    args = (scene, bvh, camera, pixels, counts, 5, grid, True, (7, done))
-    staged = trace_listed(*args)
-    monkeypatch.setattr(path, "STAGED", False)
-    for a, b in zip(staged, trace_listed(*args), strict=True):
-        np.testing.assert_array_equal(a, b)
-    assert staged[0].max() > 0
-
-
-@pytest.mark.parametrize("caustics, with_grid", [(True, False), (False, False), (False, True)])
-def test_shading_visible_points_equals_the_megakernel(
-    specular, caustics, with_grid, monkeypatch
-) -> None:
-    scene, bvh, camera, grid = specular
-    grid = grid if with_grid else None
-    points = trace_visible_points(scene, bvh, camera, 2, 4, (0, camera.height), (9, 0))
-    staged = shade(scene, bvh, points, 4, caustics, grid, (9, 0), 2)
-    monkeypatch.setattr(path, "STAGED", False)
-    reference = shade(scene, bvh, points, 4, caustics, grid, (9, 0), 2)
-    np.testing.assert_array_equal(staged[0], reference[0])
-    assert staged[1] == reference[1]
-    assert staged[0].max() > 0
-
-
-def test_listed_paths_take_the_stages(cornell, monkeypatch) -> None:
-    # trace_listed traces in stages: they give the megakernel's sums, so the only way to
-    # tell is to take the stages away
+def test_listed_paths_of_a_diffuse_scene_take_the_stages(cornell, monkeypatch) -> None:
+    # trace_listed sends a scene without mirrors or glass to the stages: they give the
+    # megakernel's sums, so the only way to tell is to take the stages away
     scene, bvh, camera = cornell
     pixels, counts = np.array([3, 50, 300]), np.array([4, 2000, 1])
     staged = trace_listed(scene, bvh, camera, pixels, counts, 8)
+
+    import dpm.tracer.path as path
 
     def refuse(*args):
         raise AssertionError("the stages were taken")
@@ -192,7 +129,7 @@ def test_listed_paths_take_the_stages(cornell, monkeypatch) -> None:
     monkeypatch.setattr(path, "_wavefront", refuse)
     with pytest.raises(AssertionError, match="stages were taken"):
         trace_listed(scene, bvh, camera, pixels, counts, 8)
-    monkeypatch.setattr(path, "STAGED", False)
+    monkeypatch.setattr(type(scene), "all_diffuse", property(lambda self: False))
     plain = trace_listed(scene, bvh, camera, pixels, counts, 8)
     for a, b in zip(staged, plain, strict=True):
         np.testing.assert_array_equal(a, b)

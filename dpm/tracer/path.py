@@ -7,10 +7,6 @@ that pt-nocaustic plus a caustic density estimate converges to pt (docs/design.m
 light-path split).
 Given a `PhotonGrid` of caustic photons, it also leaves them out at the later diffuse vertices
 and adds the grid's density estimate there instead (`auto`).
-
-The kernels here follow one path at a time (`path_pixel`, `shade_kernel`); the entry points
-(`shade`, `trace_pixels`, `trace_pixel_sums`, `trace_listed`) trace the same paths in stages
-over batches (`dpm.tracer.wavefront`, equal to the bit), unless STAGED is cleared.
 """
 
 from __future__ import annotations
@@ -42,9 +38,9 @@ from dpm.tracer.visible import (
     SCATTER,
     SHADE_DIM0,
     VisiblePoints,
-    camera_sample,
+    camera_sample_lean,
 )
-from dpm.tracer.wavefront import batch_starts, points_kernel, wavefront_kernel
+from dpm.tracer.wavefront import batch_starts, wavefront_kernel
 
 DIMS_PER_VERTEX = 8  # Fresnel, light pick, light point (2), direction (2), roulette, spare
 SAMPLES_PER_TASK = 64
@@ -52,9 +48,6 @@ SAMPLES_PER_TASK = 64
 # stratified sequence (`stratified2`) when one is given; later ones from `uniform`.
 STRATIFIED_VERTICES = 1
 PATHS_PER_TASK = 1024  # the most camera paths of one pixel in one task of `trace_listed`
-# Trace in stages (`dpm.tracer.wavefront`: 1.0-1.2x the samples per second on the example
-# scenes, the same sums); False: one path at a time, the reference tests and benchmarks use.
-STAGED = True
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
@@ -261,8 +254,7 @@ def shade(
         raise ValueError("a photon grid replaces caustic paths: it needs caustics=False")
     out = np.zeros((len(points), 3), np.float32)
     qseed, first = (-1, 0) if sequence is None else sequence
-    kernel = points_kernel if STAGED else shade_kernel
-    bad = kernel(
+    bad = shade_kernel(
         bvh.arrays, bvh.depth, scene.kernel_arrays(), points.position, points.normal,
         points.albedo, points.hit, points.pixel, points.sample, seed, qseed, first, spp,
         spawn_offset(scene), caustics, grid, out,
@@ -292,7 +284,7 @@ def path_pixel(
             sx, sy = stratified2(index, pseq, 0)
         else:
             sx, sy = uniform(seed, stream, 0), uniform(seed, stream, 1)
-        v = camera_sample(bvh, sc, cam, width, height, x, y, sx, sy, stream, seed, eps, stack)
+        v = camera_sample_lean(bvh, sc, cam, width, height, x, y, sx, sy, stream, seed, eps, stack)
         er, eg, eb = v[13], v[14], v[15]
         if not emission:
             er = eg = eb = 0.0
@@ -404,17 +396,16 @@ def _pixels(
     caustics: bool,
     sequence: tuple[int, int] | None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, int]:
-    """`pixels_kernel`'s results (in stages unless STAGED is cleared) on rows[0]..rows[1]-1:
-    (P, 3) float64 mean radiance, albedo, normal, (P,) sum of squared luminances, visible
-    points found, non-finite samples dropped."""
+    """`pixels_kernel` on rows[0]..rows[1]-1: (P, 3) float64 mean radiance, albedo, normal,
+    (P,) sum of squared luminances, visible points found, non-finite samples dropped."""
     row0, row1 = rows
     pixels = (row1 - row0) * camera.width
     qseed, first = (-1, 0) if sequence is None else sequence
-    if STAGED:  # the same sums, traced in stages (`dpm.tracer.wavefront`)
+    if scene.all_diffuse:  # the same sums, traced in stages (`dpm.tracer.wavefront`)
         tasks = np.arange(row0 * camera.width, row1 * camera.width, dtype=np.int64)
         sums = _wavefront(
             scene, bvh, camera, tasks, np.zeros(pixels, np.int64), np.full(pixels, spp),
-            np.full(pixels, first, np.int64), spp, seed, qseed, caustics, True, None,
+            np.full(pixels, first, np.int64), spp, seed, qseed, True,
         )  # fmt: skip
         image, albedo, normal = (sums[:, c : c + 3] / spp for c in (0, 3, 6))
         return image, albedo, normal, sums[:, 11], int(sums[:, 9].sum()), int(sums[:, 10].sum())
@@ -483,10 +474,10 @@ def trace_listed(
     task_out, task_sq = np.zeros((len(owner), 3)), np.zeros(len(owner))
     qseed, done = (-1, np.zeros(len(pixels), np.int64)) if sequence is None else sequence
     qfirst = np.asarray(done, np.int64)[owner] + first
-    if STAGED:  # in stages (`dpm.tracer.wavefront`)
+    if scene.all_diffuse and grid is None:  # in stages (`dpm.tracer.wavefront`)
         sums = _wavefront(
             scene, bvh, camera, pixels[owner], first, task_counts, qfirst, int(counts.max()),
-            seed, qseed, False, emission, grid,
+            seed, qseed, emission,
         )  # fmt: skip
         np.add.at(out, owner, sums[:, :3])
         np.add.at(sq, owner, sums[:, 11])
@@ -512,14 +503,12 @@ def _wavefront(
     stride: int,
     seed: int,
     sequence: int,
-    caustics: bool,
     emission: bool,
-    grid: PhotonGrid | None,
 ) -> np.ndarray:
     """(L, 12) float64 `path_pixel`'s sums for each task (pixels (L,), streams pixel·stride
-    + firsts + 0 … counts-1, sequence points qfirsts + 0 …), by `dpm.tracer.wavefront`:
-    radiance (3), albedo (3) and normal (3) sums, visible points, non-finite samples, sum of
-    squared luminances."""
+    + firsts + 0 … counts-1, sequence points qfirsts + 0 …) of a scene without mirrors or
+    glass, by `dpm.tracer.wavefront`: radiance (3), albedo (3) and normal (3) sums, visible
+    points, non-finite samples, sum of squared luminances."""
     pixels, firsts, counts, qfirsts = (
         np.ascontiguousarray(a, np.int64) for a in (pixels, firsts, counts, qfirsts)
     )
@@ -527,7 +516,6 @@ def _wavefront(
     wavefront_kernel(
         bvh.arrays, bvh.depth, scene.kernel_arrays(), camera.basis(), camera.width,
         camera.height, pixels, firsts, counts, qfirsts, stride, seed, sequence,
-        spawn_offset(scene), caustics, emission, grid, batch_starts(counts, nb.get_num_threads()),
-        out,
+        spawn_offset(scene), emission, batch_starts(counts, nb.get_num_threads()), out,
     )  # fmt: skip
     return out

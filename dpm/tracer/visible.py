@@ -120,13 +120,36 @@ def camera_sample(bvh, sc, cam, width, height, x, y, sx, sy, stream, seed, eps, 
     dimensions 2 on). A miss has zero point, normal, albedo and throughput."""
     dx, dy, dz = camera_ray(cam, width, height, x + sx, y + sy)
     hit = next_surface(bvh, sc, cam[0, 0], cam[0, 1], cam[0, 2], dx, dy, dz, stack)
-    return camera_chain(bvh, sc, dx, dy, dz, hit, stream, seed, eps, stack)
+    return chain_from(bvh, sc, dx, dy, dz, hit, stream, seed, eps, stack)
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
-def camera_chain(bvh, sc, dx, dy, dz, hit, stream, seed, eps, stack):
+def camera_sample_lean(bvh, sc, cam, width, height, x, y, sx, sy, stream, seed, eps, stack):
+    """`camera_sample`, the same values, with the chain through mirrors and glass called
+    (`camera_chain`) rather than inlined: a miss or a diffuse first hit returns at once. In
+    `path_pixel`, which inlines the path's shading too, the inlined chain made the kernel
+    larger and slower (`pt` on the ring 4.9-6.1 M samples/s, varying from process to
+    process, against 6.3-6.4); where the camera sample is all a kernel does
+    (`visible_pixel`), the call made it slower (16.8 against 9.0)."""
+    dx, dy, dz = camera_ray(cam, width, height, x + sx, y + sy)
+    hit = next_surface(bvh, sc, cam[0, 0], cam[0, 1], cam[0, 2], dx, dy, dz, stack)
+    tri, _, px, py, pz, nx, ny, nz, m, cos_i, front = hit
+    z = 0.0
+    if tri < 0:
+        return False, z, z, z, z, z, z, z, z, z, z, z, z, z, z, z
+    if sc.kind[m] != DIFFUSE:
+        return camera_chain(bvh, sc, dx, dy, dz, hit, stream, seed, eps, stack)
+    er = eg = eb = 0.0  # a diffuse surface seen straight: what `chain_from` would return
+    if front:  # emitters radiate from the front face only
+        er, eg, eb = sc.emission[m, 0] * 1.0, sc.emission[m, 1] * 1.0, sc.emission[m, 2] * 1.0
+    ar, ag, ab = albedo_at(sc, m, tri, px, py, pz)
+    return True, px, py, pz, nx, ny, nz, ar, ag, ab, 1.0, 1.0, 1.0, er, eg, eb
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def chain_from(bvh, sc, dx, dy, dz, hit, stream, seed, eps, stack):
     """`camera_sample` from its camera ray's direction d and first hit (`next_surface`'s
-    tuple) on."""
+    tuple) on, through the mirrors and glass on its way."""
     tri, _, px, py, pz, nx, ny, nz, m, cos_i, front = hit
     tr = tg = tb = 1.0
     er = eg = eb = 0.0
@@ -199,6 +222,9 @@ def camera_chain(bvh, sc, dx, dy, dz, hit, stream, seed, eps, stack):
         counted = True
     z = 0.0
     return False, z, z, z, z, z, z, z, z, z, z, z, z, er, eg, eb
+
+
+camera_chain = nb.njit(cache=True, _nrt=False, error_model="numpy")(chain_from.py_func)
 
 
 # Compiled without Numba's reference counting, as `dpm.tracer.path.shade_one` (see there).
