@@ -183,3 +183,55 @@ def test_weights_that_do_not_fit_are_refused(tmp_path: Path) -> None:
     save_weights(path, Weights("caustic", 8, 1, params))
     with pytest.raises(InputError, match="do not fit"):
         caustic_forward.load_filter(path)
+
+
+@pytest.mark.parametrize("k", range(8))
+def test_a_turned_image_gives_the_same_taps_turned(k: int) -> None:
+    """`[train] augment` turns training images by the square's symmetries: valid because the
+    kernel's taps map onto taps, so what the filter may weigh at a pixel of the turned image
+    is what it could weigh at the pixel it came from (its candidates turned alike)."""
+    from dpm.caustic.stats import tap_offsets
+    from dpm.nn.caustic_net import gather_taps
+    from dpm.nn.caustic_training import turn
+
+    rng = np.random.default_rng(k)
+    cands = jnp.asarray(rng.random((5, 7, 7, 3), dtype=np.float32))
+    taps, inside = map(np.asarray, gather_taps(cands))
+    turned, turned_inside = map(np.asarray, gather_taps(jnp.asarray(turn(np.asarray(cands), k, 1))))
+    offsets = [tuple(o) for o in tap_offsets()]
+    for t, (c, dy, dx) in enumerate(offsets):
+        dy, dx = (-dy if k & 1 else dy), (-dx if k & 2 else dx)
+        if k & 4:
+            dy, dx = dx, dy
+        u = offsets.index((c, dy, dx))  # the tap it becomes: there is one
+        np.testing.assert_array_equal(turned[:, :, u], turn(taps[:, :, t], k, 0))
+        np.testing.assert_array_equal(turned_inside[:, :, u], turn(inside[:, :, t], k, 0))
+    assert len({turn(np.arange(6).reshape(2, 3), k, 0).tobytes() for k in range(8)}) == 4
+
+
+def test_keep_best_writes_the_weights_of_the_least_validation_loss(tmp_path: Path) -> None:
+    """`[train] keep_best`: the weights saved are those offered with the least loss, also
+    after a resume that reads the losses back from the metrics rows."""
+    from dpm.nn.config import ModelConfig
+    from dpm.nn.train import Best
+    from dpm.nn.weights import load_weights
+
+    path = tmp_path / "best.msgpack"
+    fresh = CausticNet(24).init(jax.random.key(0), example_features())
+    params = {v: jax.tree.map(lambda a, v=v: np.asarray(a) + v, fresh) for v in (3, 1, 2, 0)}
+
+    def saved() -> float:  # which params the file holds: the value added to them
+        bias = load_weights(path).params["params"]["Conv_0"]["bias"]
+        return float(bias[0] - np.asarray(fresh["params"]["Conv_0"]["bias"])[0])
+
+    best = Best(path, ModelConfig("caustic", 24, 1))
+    for v in (3, 1, 2):
+        best.offer(float(v), params[v])
+    assert saved() == 1
+    again = Best(path, ModelConfig("caustic", 24, 1))
+    again.resume([{"validation_loss": "3"}, {"validation_loss": ""}, {"validation_loss": "1"}],
+                 params[3])  # fmt: skip
+    again.offer(2.0, params[2])
+    assert saved() == 1
+    again.offer(0.0, params[0])
+    assert saved() == 0

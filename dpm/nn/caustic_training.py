@@ -5,7 +5,10 @@ holds `size` (scene, pass count) images, drawn from the generator it is given al
 resumed run repeats an uninterrupted one), with the long render's target per pixel. Each
 image is its own part of the balanced loss: its error over that of the render's caustic without
 the network (SPPM at Lepski's radius, sparse pixels spread), so dim and bright scenes, one pass
-and 128, count alike, each for how much it beats the render without the network.
+and 128, count alike, each for how much it beats the render without the network. With
+`[train] augment`, each drawn image is turned by one of the square's eight symmetries (flips
+and, for square images, a transpose): the filter's taps are symmetric, so a turned image is
+another valid training image, and 148 scenes look like eight times as many.
 """
 
 from __future__ import annotations
@@ -43,6 +46,7 @@ class CausticSampler:
         entries = {e["index"]: e for e in manifest["shards"]}
         self.shards = [load_caustic_shard(out, entries[i], self.ladder) for i in indices]
         self.choices = [(i, p) for i in range(len(self.shards)) for p in self.ladder]
+        self.augment = config.train.augment
 
     def draw(
         self, rng: np.random.Generator, size: int, parts: int
@@ -57,11 +61,34 @@ class CausticSampler:
         rows = [self.choices[k] for k in picks]
         get = [(self.shards[i], p) for i, p in rows]
         names = ("features", "candidates", "own", "count", "photon")
-        batch = CausticBatch(*(np.stack([s[f"{p}/{n}"] for s, p in get]) for n in names))
-        target = np.stack([s["target"] for s, _ in get])
+        # a symmetry per image (0: none; validation, which draws every image, is not turned)
+        turns = rng.integers(8, size=size) if self.augment and size != len(self.choices) else None
+        images = []
+        for k, (s, p) in enumerate(get):
+            arrays = [s[f"{p}/{n}"] for n in names] + [s["target"]]
+            if turns is not None:  # (`photon` is a number; candidates' pixels are axes 1, 2)
+                axes = [1 if n == "candidates" else 0 for n in names] + [0]
+                arrays = [a if a.ndim < 2 else turn(a, int(turns[k]), axis)
+                          for a, axis in zip(arrays, axes, strict=True)]  # fmt: skip
+            images.append(arrays)
+        *fields, target = (np.stack(column) for column in zip(*images, strict=True))
+        batch = CausticBatch(*fields)
         pixels = target.shape[1] * target.shape[2]
         part = np.repeat(np.arange(size, dtype=np.int32), pixels)
         return batch, target.reshape(-1, 3), part
+
+
+def turn(image: np.ndarray, k: int, axis: int) -> np.ndarray:
+    """`image` with its two pixel axes (axis, axis + 1) turned by symmetry k in 0..7 of the
+    square: bit 0 flips the rows, bit 1 the columns, bit 2 transposes (square images only;
+    else left out). Any other axes (features, colours, candidates) are untouched."""
+    if k & 1:
+        image = np.flip(image, axis)
+    if k & 2:
+        image = np.flip(image, axis + 1)
+    if k & 4 and image.shape[axis] == image.shape[axis + 1]:
+        image = np.swapaxes(image, axis, axis + 1)
+    return image
 
 
 def caustic_estimates(model, z: float = TRAIN_CLAMP_Z) -> Callable:

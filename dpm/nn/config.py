@@ -48,6 +48,11 @@ class TrainConfig:
     # caustic filter only: standard errors of the pixel's own estimate the filter may move it
     # in training (the render holds it within dpm.caustic.stats.CLAMP_Z)
     clamp_z: float = 2.0
+    # caustic filter only: turn each training image by a random symmetry of the square
+    augment: bool = False
+    # the weights of the step with the least validation loss, not the last step's (the
+    # held-out scenes are the training set's own, never the unseen-scene set)
+    keep_best: bool = False
 
 
 @dataclass(frozen=True)

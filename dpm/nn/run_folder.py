@@ -26,12 +26,14 @@ METRICS = ("step", "loss", "validation_loss", "seconds")  # the columns of metri
 def _identity(config: Config) -> dict:
     """The settings a run's parameters depend on (not its folder, length or save cadence)."""
     t = asdict(config.train)
-    for key in ("out", "steps", "validate_every", "checkpoint_seconds"):
+    for key in ("out", "steps", "validate_every", "checkpoint_seconds", "keep_best"):
         t.pop(key)
     if not t["balance"]:  # runs from before the option keep their identity
         t.pop("balance")
     if t["clamp_z"] == 2.0 or config.model.architecture != "caustic":  # likewise; unused
         t.pop("clamp_z")
+    if not t["augment"]:  # likewise: off in every run from before it
+        t.pop("augment")
     data = {**config.data.identity(), "scenes": config.data.scenes}  # fixes the split
     return {"data": data, "model": asdict(config.model), "train": t}
 

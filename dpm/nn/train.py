@@ -30,7 +30,7 @@ from tqdm import tqdm
 from dpm.data.caustic_set import make_caustic_shard
 from dpm.data.dataset import build
 from dpm.nn.caustic_training import CausticSampler, caustic_estimates
-from dpm.nn.config import Config
+from dpm.nn.config import Config, ModelConfig
 from dpm.nn.features import uniform_radiance
 from dpm.nn.infer import point_radiance
 from dpm.nn.losses import training_loss
@@ -39,7 +39,7 @@ from dpm.nn.run_folder import RunFolder
 from dpm.nn.sampler import Sampler
 from dpm.nn.shape_training import ShapeSampler, shape_estimates
 from dpm.nn.sharding import DataParallel
-from dpm.nn.weights import Weights, save_weights
+from dpm.nn.weights import Weights, load_weights, save_weights
 
 # Threads that draw training batches ahead of the steps, and how many batches they keep ready:
 # half the cores (the other half and the step's own threads compute), at most 8. On the
@@ -114,9 +114,14 @@ def train(config: Config, progress: bool = True) -> tuple[dict, list[dict]]:
     optimiser, loss, step = make_steps(model, t.learning_rate, t.loss, t.balance, estimates)
     params = devices.replicate(init_params(model, m.k, t.seed, m.architecture))
     done, params, opt_state, rows = run.restore(params, devices.replicate(optimiser.init(params)))
+    best = Best(run.out / "best.msgpack", m) if t.keep_best else None
     if not rows:  # step 0: the fresh network (the uniform kernel: PM-K for DPM, PPM for nppm)
-        value = f"{float(loss(params, val_batch, val_target, val_part)):.6g}"
-        rows.append({"step": 0, "loss": "", "validation_loss": value, "seconds": "0.00"})
+        value = float(loss(params, val_batch, val_target, val_part))
+        rows.append({"step": 0, "loss": "", "validation_loss": f"{value:.6g}", "seconds": "0.00"})
+        if best:
+            best.offer(value, params)
+    elif best:
+        best.resume(rows, params)
 
     previous = signal.signal(signal.SIGTERM, _raise_interrupt)
     bar = tqdm(total=t.steps, initial=done, unit="step", desc="training", disable=not progress)
@@ -142,8 +147,10 @@ def train(config: Config, progress: bool = True) -> tuple[dict, list[dict]]:
             row = {"step": s, "loss": f"{float(value):.6g}", "validation_loss": "",
                    "seconds": f"{offset + time.perf_counter() - start:.2f}"}  # fmt: skip
             if s % t.validate_every == 0 or s == t.steps:
-                held_out = loss(params, val_batch, val_target, val_part)
-                row["validation_loss"] = f"{float(held_out):.6g}"
+                held_out = float(loss(params, val_batch, val_target, val_part))
+                row["validation_loss"] = f"{held_out:.6g}"
+                if best:
+                    best.offer(held_out, params)
                 bar.set_postfix(loss=row["loss"], validation=row["validation_loss"])
             rows.append(row)
             bar.update()
@@ -159,8 +166,36 @@ def train(config: Config, progress: bool = True) -> tuple[dict, list[dict]]:
         signal.signal(signal.SIGTERM, previous)
     run.save(done, params, opt_state, rows)
     params = jax.tree.map(np.asarray, params)
+    if best:  # the step with the least validation loss (its weights were saved then)
+        params = load_weights(best.path).params
     save_weights(run.weights, Weights(m.architecture, m.width, m.k, params))
     return params, rows
+
+
+class Best:
+    """`[train] keep_best`: the weights of the step with the least validation loss so far,
+    saved to `path` when a validation beats it (a resumed run reads its value back from the
+    metrics rows and repeats the steps after its checkpoint exactly, so it ends the same)."""
+
+    def __init__(self, path: Path, model: ModelConfig) -> None:
+        self.path, self.model, self.value = path, model, float("inf")
+
+    def offer(self, value: float, params: dict) -> None:
+        """Save params when their validation loss `value` is the least so far."""
+        if value < self.value:
+            self.value = value
+            params = jax.tree.map(np.asarray, params)
+            m = self.model
+            save_weights(self.path, Weights(m.architecture, m.width, m.k, params))
+
+    def resume(self, rows: list[dict], params: dict) -> None:
+        """Take the least validation loss of a resumed run's rows (saving the restored params
+        as the best when the file is missing: a run that predates the option)."""
+        values = [float(r["validation_loss"]) for r in rows if r["validation_loss"]]
+        if self.path.exists() and values:
+            self.value = min(values)
+        else:
+            self.offer(values[-1] if values else float("inf"), params)
 
 
 def _raise_interrupt(signum: int, frame: object) -> None:
