@@ -65,10 +65,6 @@ class PPMState(Statistics):
 
     def update(self, point: np.ndarray, flux: np.ndarray) -> None:
         """Count photons (Q,) found at points `point` with per-path flux (Q, 3); shrink radii."""
-        self._update(point, flux)
-
-    def _update(self, point: np.ndarray, flux: np.ndarray) -> tuple[np.ndarray, ...]:
-        """`update`; returns the pass's (n,) photons found, (n, 3) flux and (n,) R'²/R²."""
         n = len(self.radius)
         found = np.bincount(point, minlength=n).astype(np.float64)
         phi = np.stack([np.bincount(point, flux[:, c], minlength=n) for c in range(3)], 1)
@@ -77,15 +73,6 @@ class PPMState(Statistics):
         self.radius = self.radius * np.sqrt(ratio)
         self.tau = (self.tau + phi) * ratio[:, None]
         self.count = grown
-        return found, phi, ratio
-
-    def add_pass(self, point: np.ndarray, flux: np.ndarray, paths: int, photons: int) -> None:
-        """`update` with one pass's photons found at `point` (Q,), per-path flux (Q, 3), and
-        count the pass: its emitted `paths` and stored `photons`."""
-        self.update(point, flux)
-        self.paths += paths
-        self.passes += 1
-        self.photons += photons
 
     @property
     def reach(self) -> np.ndarray:
@@ -95,44 +82,6 @@ class PPMState(Statistics):
     def irradiance(self) -> np.ndarray:
         """(n, 3) float64 caustic irradiance E = τ / (π R² paths) (W m⁻²)."""
         return self.tau / (np.pi * self.radius[:, None] ** 2 * max(self.paths, 1))
-
-
-@dataclass
-class HalvedPPMState(PPMState):
-    """PPM statistics that also keep apart the shares of the even and the odd passes: each
-    half's τ and N are scaled by every pass's R'²/R² as the whole's are, so they sum to it,
-    and `half(k)` is an estimate at the same radii from half the passes, its photon noise
-    independent of the other half's (the radii, shrunk by both, are shared)."""
-
-    tau_half: np.ndarray | None = None  # (2, n, 3) float64 τ of the even, odd passes
-    count_half: np.ndarray | None = None  # (2, n) float64 N likewise
-    paths_half: np.ndarray | None = None  # (2,) int64 emitted paths likewise
-
-    def __post_init__(self) -> None:
-        n = len(self.radius)
-        if self.tau_half is None:
-            self.tau_half, self.count_half = np.zeros((2, n, 3)), np.zeros((2, n))
-            self.paths_half = np.zeros(2, np.int64)
-
-    def add_pass(self, point: np.ndarray, flux: np.ndarray, paths: int, photons: int) -> None:
-        """`PPMState.add_pass`, the pass's photons also into its half (the pass number's
-        parity)."""
-        k = self.passes % 2
-        found, phi, ratio = self._update(point, flux)
-        self.tau_half[k] += phi
-        self.count_half[k] += found
-        self.tau_half *= ratio[None, :, None]
-        self.count_half *= ratio[None, :]
-        self.paths_half[k] += paths
-        self.paths += paths
-        self.passes += 1
-        self.photons += photons
-
-    def half(self, k: int) -> PPMState:
-        """The statistics of the even (k = 0) or odd (1) passes alone, at the shared radii."""
-        return PPMState(self.radius, self.count_half[k], self.tau_half[k], alpha=self.alpha,
-                        paths=int(self.paths_half[k]),
-                        passes=(self.passes + 1 - k) // 2)  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -169,8 +169,10 @@ def sppm_gather(
         flux = photons.flux[pairs.photon].astype(np.float64) * photons.n_paths * weight
         for state in states:
             inside = pairs.distance < state.radius[pixel]
-            # PPM's statistics, per pixel
-            state.add_pass(pixel[inside], flux[inside], photons.n_paths, len(photons))
+            state.update(pixel[inside], flux[inside])  # PPM's statistics, per pixel
+            state.paths += photons.n_paths
+            state.passes += 1
+            state.photons += len(photons)
 
 
 @dataclass(frozen=True)

@@ -60,7 +60,7 @@ from dpm.denoise import denoise, guides, restore_certain
 from dpm.density.base import luminance
 from dpm.density.progressive import pass_seed
 from dpm.errors import InputError
-from dpm.estimators.ppm import ALPHA, HalvedPPMState, PPMState, check_progressive
+from dpm.estimators.ppm import ALPHA, PPMState, check_progressive
 from dpm.estimators.sppm import sppm_gather
 from dpm.filters import box_mean
 from dpm.methods.adaptive import ADAPT_AFTER, EXTRA_CAP, EXTRA_PER_PIXEL, Halves
@@ -363,7 +363,7 @@ class Auto(Method):
             "light_samples": max(self.light_samples, 0), "sharp_pixels": self.sharp_pixels,
             "pass_seconds": self.pass_seconds, "setup_seconds": self.setup_seconds,
             "overran": self.overran, "denoised": self.denoised,
-            "denoiser_share": self.denoiser_share, "filter_share": self.filter_share,
+            "denoiser_share": self.denoiser_share,
         }  # fmt: skip
 
 
@@ -379,9 +379,8 @@ class Passes:
         self.w, self.h = camera.width, camera.height
         self.pixels = self.w * self.h
         self.full = o.component == "full"
-        # kept in halves (even, odd passes), for the filter's held-out share (`filter_share`)
-        self.state = HalvedPPMState.start(self.pixels, o.radius or 1.0, ALPHA)  # radii: pass 0
-        self.narrow = HalvedPPMState.start(self.pixels, 1.0, ALPHA)  # at NARROW × its radii
+        self.state = PPMState.start(self.pixels, o.radius or 1.0, ALPHA)  # radii: first pass
+        self.narrow = PPMState.start(self.pixels, 1.0, ALPHA)  # the same at NARROW × its radii
         self.paths = Halves(self.h, self.w)
         self.extra_paths = 0
         # the denoiser's guides per half (albedo, normal sums of its passes): a half checked
@@ -672,7 +671,6 @@ class Passes:
         m.passes, m.spp, m.plan, m.caustic_photons = j, self.spp, self.plan, self.state.photons
         m.dropped, m.extra_paths = self.dropped, self.extra_paths
         m.denoised, m.denoiser_share = False, 0.0  # set below where the denoiser runs
-        m.filter_share = None  # set by `caustics` where the learned filter runs
         m.light_pixels = 0 if self.glassy is None else len(self.glassy)
         seen = int(sum(self.glow.half(k).count.sum() for k in (0, 1)))
         m.light_samples = seen - self.spp * self.pixels
@@ -778,22 +776,18 @@ class Passes:
         shape = (self.h, self.w, 3)
         return (sums[0] / n).reshape(shape), (sums[1] / n).reshape(shape)
 
-    def caustic_stats(self, chosen: tuple | None = None, half: int | None = None) -> CausticStats:
+    def caustic_stats(self, chosen: tuple | None = None) -> CausticStats:
         """The passes' per-pixel caustic statistics, as the learned filter reads them (chosen:
-        `sharper_where_biased`'s result, when already made), or those of half `half` of the
-        passes (0: even, 1: odd) alone."""
+        `sharper_where_biased`'s result, when already made)."""
         s, n, fp = self.state, self.narrow, self.footprint
-        if half is not None:
-            s, n = s.half(half), n.half(half)
         own, sharp = chosen or sharper_where_biased(s, n, LEPSKI_Z)
         count = np.where(sharp, n.count, s.count)
         # each photon falls in the discs of about π (radius in pixel widths)² pixels
         overlap = np.pi * (np.where(sharp, n.radius, s.radius) / fp) ** 2
-        passes = self.j if half is None else s.passes
         return CausticStats(
-            self.h, self.w, passes, s.irradiance(), n.irradiance(), s.count, n.count, own,
+            self.h, self.w, self.j, s.irradiance(), n.irradiance(), s.count, n.count, own,
             count, spread_sparse(own, count, overlap, self.h, self.w), s.radius / fp,
-            np.log(fp / np.median(fp)), *(g.reshape(-1, 3) for g in self.guides(half)),
+            np.log(fp / np.median(fp)), *(g.reshape(-1, 3) for g in self.guides()),
         )  # fmt: skip
 
     def caustics(self) -> tuple[np.ndarray, np.ndarray]:
@@ -808,26 +802,5 @@ class Passes:
         stats = self.caustic_stats((caustic, sharp))
         if self.filter is not None:
             with self.watch("network"):
-                filtered = caustic_forward.filter_caustics(self.filter, stats)
-                share = self.method.filter_share = self.filter_share()
-                return stats.spread + share * (filtered - stats.spread), stats.own_count
+                return caustic_forward.filter_caustics(self.filter, stats), stats.own_count
         return stats.spread, stats.own_count
-
-    def filter_share(self) -> float:
-        """The weight in [0, 1] of the filter's caustic against the render's own (SPPM at
-        Lepski's radius, sparse pixels spread): the blend expected closest to the truth.
-
-        As `denoiser_share` does for the paths: the filter is run on each half of the passes
-        alone (a), and the blend a_own + share·(a_filtered − a_own) fitted by least squares to
-        the other half's own estimate b, independent of a's photons: share = Σ (F − S)·(b − S)
-        / Σ (F − S)² over both halves. Where the network blurs a sharp caustic or otherwise
-        errs, the share falls (towards the render without the network); where it removes
-        noise it stays near 1. The whole image takes the same share."""
-        fit = moved = 0.0
-        for k in (0, 1):
-            a, b = self.caustic_stats(half=k), self.caustic_stats(half=1 - k)
-            x = (caustic_forward.filter_caustics(self.filter, a) - a.spread).ravel()
-            fit += float(x @ (b.narrow - a.spread).ravel())
-            moved += float(x @ x)
-        share = fit / moved if moved > 0 else 1.0
-        return min(max(share, 0.0), 1.0) if np.isfinite(share) else 1.0
