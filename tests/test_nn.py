@@ -573,7 +573,7 @@ def test_a_caustic_filter_trains_and_the_render_reads_its_weights(tmp_path: Path
                      ('"runs/caustic"', f'"{tmp_path / "run"}"'), ("scenes = 160", "scenes = 3"),
                      ("width = 64", "width = 16"),
                      ("passes = [1, 2, 4, 8, 16, 32, 64, 128]", "passes = [1, 3]"),
-                     ("target_passes = 512", "target_passes = 8"), ("steps = 3000", "steps = 3"),
+                     ("target_passes = 512", "target_passes = 8"), ("steps = 6000", "steps = 3"),
                      ("batch = 16 ", "batch = 2 "),
                      ("scenes_per_batch = 16", "scenes_per_batch = 2"),
                      ("validation_scenes = 12", "validation_scenes = 1"),
@@ -588,6 +588,9 @@ def test_a_caustic_filter_trains_and_the_render_reads_its_weights(tmp_path: Path
     assert weights.out_kernel.shape == (24, 101)
     rows = (tmp_path / "run" / "metrics.csv").read_text().splitlines()
     assert len(rows) == 5 and all("nan" not in r for r in rows)  # header, steps 0-3
+    # the shipped config keeps the held-out best step's weights: those are what it wrote
+    best = tmp_path / "run" / "best.msgpack"
+    assert best.read_bytes() == (tmp_path / "run" / "model.msgpack").read_bytes()
 
 
 def test_threads_drawing_ahead_change_nothing(tiny: Config, monkeypatch) -> None:
@@ -615,3 +618,14 @@ def test_a_run_keeps_its_identity_when_clamp_z_is_left_at_its_default(tiny: Conf
     assert "clamp_z" not in _identity(other)["train"]  # not the caustic architecture
     caustic = replace(other, model=replace(other.model, architecture="caustic"))
     assert _identity(caustic)["train"]["clamp_z"] == 1.0
+
+
+def test_augment_joins_a_runs_identity_only_when_set_and_keep_best_never(tiny: Config) -> None:
+    """Runs from before `augment` and `keep_best` still resume; turning the images changes
+    the parameters (a resume must not mix the two), keeping the best step does not."""
+    from dpm.nn.run_folder import _identity
+
+    assert {"augment", "keep_best"}.isdisjoint(_identity(tiny)["train"])
+    both = replace(tiny, train=replace(tiny.train, augment=True, keep_best=True))
+    assert _identity(both)["train"]["augment"] is True
+    assert "keep_best" not in _identity(both)["train"]
