@@ -62,7 +62,7 @@ def main() -> None:
     p.add_argument("--config", type=Path, default=Path("configs/caustic.toml"))
     p.add_argument("--scenes", type=int, default=0, help="the set's size (default: scenes)")
     p.add_argument("--last", type=int, default=0, help="scenes (default: validation_scenes)")
-    p.add_argument("--z", type=float, nargs="+", default=[TRAIN_CLAMP_Z, CLAMP_Z])
+    p.add_argument("--z", type=float, nargs="+", default=sorted({TRAIN_CLAMP_Z, CLAMP_Z}))
     a = p.parse_args()
     config = load_config(a.config)
     last = a.last or config.train.validation_scenes

@@ -6,9 +6,9 @@ resumed run repeats an uninterrupted one), with the long render's target per pix
 image is its own part of the balanced loss: its error over that of the render's caustic without
 the network (SPPM at Lepski's radius, sparse pixels spread), so dim and bright scenes, one pass
 and 128, count alike, each for how much it beats the render without the network. With
-`[train] augment`, each drawn image is turned by one of the square's eight symmetries (flips
-and, for square images, a transpose): the filter's taps are symmetric, so a turned image is
-another valid training image, and 148 scenes look like eight times as many.
+`[train] augment`, each randomly drawn image is turned by one of the square's eight symmetries
+(flips and, for square images, a transpose): the filter's taps map onto taps, so 148 scenes
+look like eight times as many (the world-space normal guide is not turned with them).
 """
 
 from __future__ import annotations
@@ -54,15 +54,12 @@ class CausticSampler:
         """A CausticBatch of `size` images (every (scene, pass count) in order when `size` is
         their number, else drawn at random; `parts` is unused: each image is a part), the
         (size·H·W, 3) target radiance and (size·H·W,) int32 the image of each pixel."""
-        if size == len(self.choices):
-            picks = range(size)
-        else:
-            picks = rng.integers(len(self.choices), size=size)
+        ordered = size == len(self.choices)  # (validation: every image, as it is)
+        picks = range(size) if ordered else rng.integers(len(self.choices), size=size)
         rows = [self.choices[k] for k in picks]
         get = [(self.shards[i], p) for i, p in rows]
         names = ("features", "candidates", "own", "count", "photon")
-        # a symmetry per image (0: none; validation, which draws every image, is not turned)
-        turns = rng.integers(8, size=size) if self.augment and size != len(self.choices) else None
+        turns = rng.integers(8, size=size) if self.augment and not ordered else None
         images = []
         for k, (s, p) in enumerate(get):
             arrays = [s[f"{p}/{n}"] for n in names] + [s["target"]]

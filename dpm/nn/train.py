@@ -181,7 +181,9 @@ class Best:
         self.path, self.model, self.value = path, model, float("inf")
 
     def offer(self, value: float, params: dict) -> None:
-        """Save params when their validation loss `value` is the least so far."""
+        """Save params when their validation loss `value` is the least so far (compared as
+        metrics.csv keeps it, so a resumed run, reading the rows back, decides the same)."""
+        value = float(f"{value:.6g}")
         if value < self.value:
             self.value = value
             params = jax.tree.map(np.asarray, params)
