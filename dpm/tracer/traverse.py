@@ -482,17 +482,35 @@ def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
 
     `bvh` is a BVHArrays; `stack` is scratch from `new_stack`.
     """
-    bounds, kids, planes = bvh.bounds, bvh.kids, bvh.tri_planes
     ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
     kz = _dominant_axis(dx, dy, dz)
     kx, ky, kz, sx, sy, sz = ray_setup_inverse(dx, dy, dz, kz, pick(kz, ix, iy, iz))
     o = (pick(kx, ox, oy, oz), pick(ky, ox, oy, oz), pick(kz, ox, oy, oz))
-    nx, ny, nz, fx, fy, fz = _planes(ix, iy, iz)
     ray = box_constants_simd(ox, oy, oz, ix, iy, iz)
-    best_t, best = tmax, -1
+    best_t, best = closest_below(
+        bvh, 0, ray, _planes(ix, iy, iz), (kx, ky, kz), o, (sx, sy, sz), tmax, -1, stack
+    )
+    if best < 0:
+        return np.inf, -1
+    return best_t, bvh.tri_index[best]
+
+
+@nb.njit(cache=True, inline="always", _nrt=False, error_model="numpy")
+def closest_below(bvh, start, ray, planes_at, k, o, s, best_t, best, stack):
+    """(t, BVH-order triangle) of the nearest hit below node reference `start` nearer than
+    (best_t, best), or (best_t, best) itself; of hits at equal t the lower triangle wins,
+    so the result does not depend on the order subtrees are visited in.
+
+    The ray is given by its `box_constants` ray, `_planes` planes_at, and its watertight
+    constants: axes k = (kx, ky, kz), origin coordinates o along them, shear s (sx, sy, sz).
+    """
+    bounds, kids, planes = bvh.bounds, bvh.kids, bvh.tri_planes
+    nx, ny, nz, fx, fy, fz = planes_at
+    kx, ky, kz = k
+    sx, sy, sz = s
     far = _float32_up(best_t * _CULL_SCALE)
     cull = _bits32(far)
-    ref, sp = 0, 0
+    ref, sp = start, 0
     while True:
         if ref >= 0:
             m = _box_test(bounds, ref, nx, ny, nz, fx, fy, fz, ray, far, stack)
@@ -537,11 +555,11 @@ def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
             hits = _leaf_test(planes, first, code & _COUNT, kx, ky, kz, *o, sx, sy, sz, best_t)
             m = int(hits[0])
             if m != 0:
-                while m != 0:  # lanes in triangle order: the first of equal nearest ones wins
+                while m != 0:
                     c = _lowest_bit(m)
                     m &= m - 1
                     t = _lane_distance(hits, c)
-                    if t < best_t:
+                    if t < best_t or (t == best_t and first + c < best):
                         best_t, best = t, first + c
                 far = _float32_up(best_t * _CULL_SCALE)
                 cull = _bits32(far)
@@ -552,45 +570,61 @@ def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
             break
         sp -= 1
         ref = stack[sp, 0]
-    if best < 0:
-        return np.inf, -1
-    return best_t, bvh.tri_index[best]
+    return best_t, best
 
 
 @nb.njit(cache=True, _nrt=False, error_model="numpy")
 def any_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     """True if the ray hits any triangle at a distance in (0, tmax)."""
-    bounds, kids, planes = bvh.bounds, bvh.kids, bvh.tri_planes
     ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
     kz = _dominant_axis(dx, dy, dz)
     kx, ky, kz, sx, sy, sz = ray_setup_inverse(dx, dy, dz, kz, pick(kz, ix, iy, iz))
     o = (pick(kx, ox, oy, oz), pick(ky, ox, oy, oz), pick(kz, ox, oy, oz))
-    nx, ny, nz, fx, fy, fz = _planes(ix, iy, iz)
     ray = box_constants_simd(ox, oy, oz, ix, iy, iz)
+    return any_below(bvh, 0, ray, _planes(ix, iy, iz), (kx, ky, kz), o, (sx, sy, sz), tmax, stack)
+
+
+@nb.njit(cache=True, inline="always", _nrt=False, error_model="numpy")
+def any_below(bvh, start, ray, planes_at, k, o, s, tmax, stack):
+    """True if the ray (given as to `closest_below`) hits a triangle below node reference
+    `start` at a distance in (0, tmax)."""
+    bounds, kids, planes = bvh.bounds, bvh.kids, bvh.tri_planes
+    nx, ny, nz, fx, fy, fz = planes_at
+    kx, ky, kz = k
+    sx, sy, sz = s
     far = _float32_up(tmax * _CULL_SCALE)
-    stack[0, 0] = 0
+    stack[0, 0] = start
     sp = 1
     while sp > 0:
         sp -= 1
-        node = stack[sp, 0]
-        m = _box_test(bounds, node, nx, ny, nz, fx, fy, fz, ray, far, stack)
+        ref = stack[sp, 0]
+        if ref < 0:  # only where `start` is a leaf
+            return _leaf_any(planes, ref, k, o, s, tmax)
+        m = _box_test(bounds, ref, nx, ny, nz, fx, fy, fz, ray, far, stack)
         while m != 0:
             c = _lowest_bit(m)
             m &= m - 1
-            ref = kids[node, REFS + c]
-            if ref >= 0:
-                stack[sp, 0] = ref
+            child = kids[ref, REFS + c]
+            if child >= 0:
+                stack[sp, 0] = child
                 sp += 1
-                continue
-            code = ~ref
-            first = code >> LEAF_BITS
-            hits = _leaf_test(planes, first, code & _COUNT, kx, ky, kz, *o, sx, sy, sz, tmax)
-            lanes = int(hits[0])
-            while lanes != 0:  # hits count only strictly before tmax (hit_triangle admits tmax)
-                lane = _lowest_bit(lanes)
-                lanes &= lanes - 1
-                if _lane_distance(hits, lane) < tmax:
-                    return True
+            elif _leaf_any(planes, child, k, o, s, tmax):
+                return True
+    return False
+
+
+@nb.njit(cache=True, inline="always", _nrt=False, error_model="numpy")
+def _leaf_any(planes, ref, k, o, s, tmax):
+    """True if the ray hits a triangle of leaf reference ref at a distance in (0, tmax)."""
+    code = ~ref
+    first = code >> LEAF_BITS
+    hits = _leaf_test(planes, first, code & _COUNT, *k, *o, *s, tmax)
+    lanes = int(hits[0])
+    while lanes != 0:  # hits count only strictly before tmax (hit_triangle admits tmax)
+        lane = _lowest_bit(lanes)
+        lanes &= lanes - 1
+        if _lane_distance(hits, lane) < tmax:
+            return True
     return False
 
 

@@ -26,6 +26,7 @@ import math
 import numba as nb
 import numpy as np
 
+from dpm.tracer.packet import LANES, any_packet, closest_packet, new_packet
 from dpm.tracer.sampling import (
     pixel_sequence,
     sample_cdf,
@@ -34,7 +35,7 @@ from dpm.tracer.sampling import (
     uniform,
 )
 from dpm.tracer.surface import albedo_at
-from dpm.tracer.traverse import any_hit, closest_hit, new_stack
+from dpm.tracer.traverse import new_stack
 from dpm.tracer.visible import (
     LUMINANCE,
     MAX_VERTICES,
@@ -50,12 +51,6 @@ from dpm.tracer.visible import (
 BATCH = 1024
 MIN_BATCHES = 8  # per thread at least, where the paths allow it (the threads' last batches)
 
-# The traversal, inlined into the stages that trace (compiled without reference counting,
-# as `closest_hit` is): a call passes the BVH's arrays by value, some 40 words per ray.
-_closest = nb.njit(cache=True, inline="always", _nrt=False, error_model="numpy")(
-    closest_hit.py_func
-)
-_any = nb.njit(cache=True, inline="always", _nrt=False, error_model="numpy")(any_hit.py_func)
 _STAGE = {"cache": True, "_nrt": False, "error_model": "numpy"}
 
 
@@ -94,14 +89,15 @@ def wavefront_kernel(
     for b in nb.prange(len(starts) - 1):
         lo, hi = starts[b], starts[b + 1]
         batch_paths(
-            bvh, new_stack(depth), sc, cam, width, height, pixels[lo:hi], firsts[lo:hi],
+            bvh, new_stack(depth), new_packet(depth), sc, cam, width, height, pixels[lo:hi],
+            firsts[lo:hi],
             counts[lo:hi], qfirsts[lo:hi], stride, seed, sequence, eps, emission, out[lo:hi],
         )  # fmt: skip
 
 
 @nb.njit(cache=True, error_model="numpy")
 def batch_paths(
-    bvh, stack, sc, cam, width, height, pixels, firsts, counts, qfirsts, stride, seed,
+    bvh, stack, packet, sc, cam, width, height, pixels, firsts, counts, qfirsts, stride, seed,
     sequence, eps, emission, out,
 ):  # fmt: skip
     """One batch of `wavefront_kernel`: allocates its state, runs it (`_run`)."""
@@ -127,8 +123,8 @@ def batch_paths(
     )  # fmt: skip
     per_path = np.zeros((n, 13))  # each path's terms (`_path_terms`)
     _run(
-        bvh, stack, sc, cam, width, height, pixels, firsts, counts, qfirsts, stride, seed,
-        sequence, eps, emission, ids, pseq, go, test, hit_t, hit_tri, rows, per_path,
+        bvh, stack, packet, sc, cam, width, height, pixels, firsts, counts, qfirsts, stride,
+        seed, sequence, eps, emission, ids, pseq, go, test, hit_t, hit_tri, rows, per_path,
     )  # fmt: skip
     _sums(counts, per_path, out)
 
@@ -148,7 +144,7 @@ def _sums(counts, per_path, out):
 
 @nb.njit(**_STAGE)
 def _run(
-    bvh, stack, sc, cam, width, height, pixels, firsts, counts, qfirsts, stride, seed,
+    bvh, stack, packet, sc, cam, width, height, pixels, firsts, counts, qfirsts, stride, seed,
     sequence, eps, emission, ids, pseq, go, test, hit_t, hit_tri, rows, per_path,
 ):  # fmt: skip
     """The batch's paths from the camera to their ends; per_path (N, 13) gets each path's
@@ -179,7 +175,7 @@ def _run(
             ox[n], oy[n], oz[n] = cam[0, 0], cam[0, 1], cam[0, 2]
             go[n] = True
             n += 1
-    _trace_closest(bvh, stack, n, go, ox, oy, oz, dx, dy, dz, hit_t, hit_tri)
+    _trace_closest(bvh, stack, packet, n, go, ox, oy, oz, dx, dy, dz, hit_t, hit_tri)
     alive = 0
     for j in range(n):  # the visible points (`camera_sample`); the paths that go on
         tri = hit_tri[j]
@@ -216,12 +212,12 @@ def _run(
             live, eps, la, lb, rows[28:37], lpdf, lnx, lny, lnz, ler, leg, leb, px, py, pz, nx,
             ny, nz, br, bg, bb, test, ox, oy, oz, dx, dy, dz, length, gr, gg, gb, share,
         )  # fmt: skip
-        _trace_shadow(bvh, stack, live, test, ox, oy, oz, dx, dy, dz, length)
+        _trace_shadow(bvh, stack, packet, live, test, ox, oy, oz, dx, dy, dz, length)
         _bounce(
             live, seed, eps, test, gr, gg, gb, sr, sg, sb, vertex, stream, br, bg, bb, nx, ny,
             nz, px, py, pz, u4, u5, go, pdf_b, ox, oy, oz, dx, dy, dz,
         )  # fmt: skip
-        _trace_closest(bvh, stack, live, go, ox, oy, oz, dx, dy, dz, hit_t, hit_tri)
+        _trace_closest(bvh, stack, packet, live, go, ox, oy, oz, dx, dy, dz, hit_t, hit_tri)
         _hit_gather(sc, live, hit_t, hit_tri, ox, oy, oz, dx, dy, dz, rows[37:44], t0, t1, t2)
         _hit_shade(
             live, hit_t, hit_tri, ox, oy, oz, dx, dy, dz, lnx, lny, lnz, lpdf, ler, leg, leb,
@@ -269,22 +265,54 @@ def _path_terms(n, per_path):
 
 
 @nb.njit(**_STAGE)
-def _trace_closest(bvh, stack, n, go, ox, oy, oz, dx, dy, dz, hit_t, hit_tri):
-    """Closest hits of the rays whose `go` is set (hit_tri -1 for the others)."""
+def _trace_closest(bvh, stack, packet, n, go, ox, oy, oz, dx, dy, dz, hit_t, hit_tri):
+    """Closest hits of the rays whose `go` is set (hit_tri -1 for the others), in packets of
+    LANES consecutive such rays: a pixel's paths lie together, and their rays enter the same
+    nodes (`dpm.tracer.packet`; the same hits as one ray at a time)."""
+    limit, t, tri, at = packet[5]
+    for i in range(LANES):
+        limit[i] = np.inf
+    po, pd = packet[0][:3], packet[0][3:6]
+    j = 0
     for k in range(n):
         hit_tri[k] = -1
         if go[k]:
-            hit_t[k], hit_tri[k] = _closest(
-                bvh, ox[k], oy[k], oz[k], dx[k], dy[k], dz[k], np.inf, stack
-            )
+            _put(po, pd, j, ox[k], oy[k], oz[k], dx[k], dy[k], dz[k])
+            at[j] = k
+            j += 1
+        if j == LANES or (k == n - 1 and j > 0):
+            closest_packet(bvh, packet, (1 << j) - 1, limit, stack, t, tri)
+            for i in range(j):
+                hit_t[at[i]], hit_tri[at[i]] = t[i], tri[i]
+            j = 0
 
 
 @nb.njit(**_STAGE)
-def _trace_shadow(bvh, stack, n, test, ox, oy, oz, dx, dy, dz, length):
-    """`test` cleared where the segment of the ray up to `length` is occluded."""
+def _trace_shadow(bvh, stack, packet, n, test, ox, oy, oz, dx, dy, dz, length):
+    """`test` cleared where the segment of the ray up to `length` is occluded (in packets,
+    as `_trace_closest`)."""
+    limit, _, _, at = packet[5]
+    po, pd = packet[0][:3], packet[0][3:6]
+    j = 0
     for k in range(n):
         if test[k] and length[k] > 0:
-            test[k] = not _any(bvh, ox[k], oy[k], oz[k], dx[k], dy[k], dz[k], length[k], stack)
+            _put(po, pd, j, ox[k], oy[k], oz[k], dx[k], dy[k], dz[k])
+            limit[j] = length[k]
+            at[j] = k
+            j += 1
+        if j == LANES or (k == n - 1 and j > 0):
+            blocked = any_packet(bvh, packet, (1 << j) - 1, limit, stack)
+            for i in range(j):
+                if (blocked >> i) & 1:
+                    test[at[i]] = False
+            j = 0
+
+
+@nb.njit(inline="always")
+def _put(po, pd, j, ox, oy, oz, dx, dy, dz):
+    """Lane j of a packet's origins and directions."""
+    po[0][j], po[1][j], po[2][j] = ox, oy, oz
+    pd[0][j], pd[1][j], pd[2][j] = dx, dy, dz
 
 
 @nb.njit(**_STAGE)
