@@ -25,9 +25,10 @@ from dpm.tracer.lights import (
     sample_light_point,
     sample_light_stratified,
 )
+from dpm.tracer.packet import LANES, closest_packet, new_packet
 from dpm.tracer.photon_grid import PhotonGrid, grid_irradiance
 from dpm.tracer.sampling import pixel_sequence, sample_cosine, stratified2, uniform
-from dpm.tracer.surface import albedo_at, next_surface
+from dpm.tracer.surface import albedo_at, next_surface, surface_at
 from dpm.tracer.traverse import any_hit, new_stack, spawn_offset
 from dpm.tracer.visible import (
     LUMINANCE,
@@ -38,7 +39,8 @@ from dpm.tracer.visible import (
     SCATTER,
     SHADE_DIM0,
     VisiblePoints,
-    camera_sample_lean,
+    camera_ray,
+    lean_from,
 )
 from dpm.tracer.wavefront import batch_starts, wavefront_kernel
 
@@ -48,6 +50,7 @@ SAMPLES_PER_TASK = 64
 # stratified sequence (`stratified2`) when one is given; later ones from `uniform`.
 STRATIFIED_VERTICES = 1
 PATHS_PER_TASK = 1024  # the most camera paths of one pixel in one task of `trace_listed`
+LISTED_PER_TASK = 8  # listed tasks that share one packet's arrays (allocated once for them)
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
@@ -265,50 +268,69 @@ def shade(
 @nb.njit(cache=True, _nrt=False, error_model="numpy")
 def path_pixel(
     bvh, sc, cam, width, height, pix, first, spp, stride, seed, sequence, qfirst, eps,
-    caustics, emission, grid, stack,
+    caustics, emission, grid, stack, packet,
 ):  # fmt: skip
     """Sums over spp camera paths of pixel pix (row-major index), random streams pix·stride
     + first … first+spp-1: (radiance r, g, b, denoiser albedo r, g, b and normal x, y, z,
     visible points found, non-finite samples, sum of each path's squared luminance); with
     emission False, the light seen along the camera's specular chain is left out. With
     sequence ≥ 0, path s's position in the pixel and its first vertices' light samples and
-    directions are point qfirst + s of the pixel's stratified sequence (`stratified2`)."""
+    directions are point qfirst + s of the pixel's stratified sequence (`stratified2`).
+
+    The camera rays of up to LANES paths at a time are traced as one packet (`packet`, from
+    `new_packet`): a pixel's rays enter the same nodes. The paths then go on one by one."""
     y, x = pix // width, pix % width
     pseq = pixel_sequence(max(sequence, 0), pix)
     sr = sg = sb = gr = gg = gb = hx = hy = hz = sq = 0.0
     hits = bad = 0
-    for s in range(spp):
-        stream = pix * stride + first + s
-        index = qfirst + s if sequence >= 0 else np.int64(-1)
-        if index >= 0:
-            sx, sy = stratified2(index, pseq, 0)
-        else:
-            sx, sy = uniform(seed, stream, 0), uniform(seed, stream, 1)
-        v = camera_sample_lean(bvh, sc, cam, width, height, x, y, sx, sy, stream, seed, eps, stack)
-        er, eg, eb = v[13], v[14], v[15]
-        if not emission:
-            er = eg = eb = 0.0
-        if v[0]:
-            hits += 1
-            r, g, b = shade_path(
-                bvh, sc, seed, stream, pseq, index, eps, caustics, grid, stack,
-                v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], v[9],
-            )  # fmt: skip
-            if math.isfinite(r) and math.isfinite(g) and math.isfinite(b):
-                er, eg, eb = er + v[10] * r, eg + v[11] * g, eb + v[12] * b
-            else:  # as `shade`: the sample's reflected light counts as zero
-                bad += 1
-            gr += min(max(v[7] * v[10], 0.0), 1.0)
-            gg += min(max(v[8] * v[11], 0.0), 1.0)
-            gb += min(max(v[9] * v[12], 0.0), 1.0)
-            hx, hy, hz = hx + v[4], hy + v[5], hz + v[6]
-        else:
-            peak = max(v[13], v[14], v[15])
-            if peak > 0:  # a light seen directly: its normalised colour
-                gr, gg, gb = gr + v[13] / peak, gg + v[14] / peak, gb + v[15] / peak
-        sr, sg, sb = sr + er, sg + eg, sb + eb
-        lum = LUMINANCE[0] * er + LUMINANCE[1] * eg + LUMINANCE[2] * eb
-        sq += lum * lum
+    ox, oy, oz = cam[0, 0], cam[0, 1], cam[0, 2]
+    po, pd = packet[0][:3], packet[0][3:6]
+    limit, hit_t, hit_tri, _ = packet[5]
+    for s0 in range(0, spp, LANES):
+        lanes = min(LANES, spp - s0)
+        for j in range(lanes):
+            s = s0 + j
+            stream = pix * stride + first + s
+            index = qfirst + s if sequence >= 0 else np.int64(-1)
+            if index >= 0:
+                sx, sy = stratified2(index, pseq, 0)
+            else:
+                sx, sy = uniform(seed, stream, 0), uniform(seed, stream, 1)
+            po[0][j], po[1][j], po[2][j] = ox, oy, oz
+            pd[0][j], pd[1][j], pd[2][j] = camera_ray(cam, width, height, x + sx, y + sy)
+            limit[j] = np.inf
+        closest_packet(bvh, packet, (1 << lanes) - 1, limit, stack, hit_t, hit_tri)
+        for j in range(lanes):
+            s = s0 + j
+            stream = pix * stride + first + s
+            index = qfirst + s if sequence >= 0 else np.int64(-1)
+            dx, dy, dz = pd[0][j], pd[1][j], pd[2][j]
+            hit = surface_at(sc, ox, oy, oz, dx, dy, dz, hit_t[j], hit_tri[j])
+            v = lean_from(bvh, sc, dx, dy, dz, hit, stream, seed, eps, stack)
+            er, eg, eb = v[13], v[14], v[15]
+            if not emission:
+                er = eg = eb = 0.0
+            if v[0]:
+                hits += 1
+                r, g, b = shade_path(
+                    bvh, sc, seed, stream, pseq, index, eps, caustics, grid, stack,
+                    v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], v[9],
+                )  # fmt: skip
+                if math.isfinite(r) and math.isfinite(g) and math.isfinite(b):
+                    er, eg, eb = er + v[10] * r, eg + v[11] * g, eb + v[12] * b
+                else:  # as `shade`: the sample's reflected light counts as zero
+                    bad += 1
+                gr += min(max(v[7] * v[10], 0.0), 1.0)
+                gg += min(max(v[8] * v[11], 0.0), 1.0)
+                gb += min(max(v[9] * v[12], 0.0), 1.0)
+                hx, hy, hz = hx + v[4], hy + v[5], hz + v[6]
+            else:
+                peak = max(v[13], v[14], v[15])
+                if peak > 0:  # a light seen directly: its normalised colour
+                    gr, gg, gb = gr + v[13] / peak, gg + v[14] / peak, gb + v[15] / peak
+            sr, sg, sb = sr + er, sg + eg, sb + eb
+            lum = LUMINANCE[0] * er + LUMINANCE[1] * eg + LUMINANCE[2] * eb
+            sq += lum * lum
     return sr, sg, sb, gr, gg, gb, hx, hy, hz, hits, bad, sq
 
 
@@ -329,11 +351,11 @@ def pixels_kernel(
         # Threads take contiguous ranges of i; scattering the tasks they map to over the rows
         # evens out their work where one part of the image costs more than another.
         task = (i * SCATTER) % n_tasks
-        stack = new_stack(depth)
+        stack, packet = new_stack(depth), new_packet(depth)
         for p in range(task * per_task, min(n, (task + 1) * per_task)):
             v = path_pixel(
                 bvh, sc, cam, width, height, row0 * width + p, 0, spp, spp, seed, sequence,
-                first, eps, caustics, True, None, stack,
+                first, eps, caustics, True, None, stack, packet,
             )  # fmt: skip
             image[p, 0], image[p, 1], image[p, 2] = v[0] / spp, v[1] / spp, v[2] / spp
             albedo[p, 0], albedo[p, 1], albedo[p, 2] = v[3] / spp, v[4] / spp, v[5] / spp
@@ -429,13 +451,15 @@ def listed_kernel(
     + 0 … of the pixel's stratified sequence) into out, their squared luminances' sum into
     sq; returns the non-finite samples dropped."""
     bad = np.zeros(len(pixels), np.int64)
-    for i in nb.prange(len(pixels)):
-        stack = new_stack(depth)
-        v = path_pixel(
-            bvh, sc, cam, width, height, pixels[i], first[i], counts[i], stride, seed,
-            sequence, qfirst[i], eps, False, emission, grid, stack,
-        )  # fmt: skip
-        out[i, 0], out[i, 1], out[i, 2], sq[i], bad[i] = v[0], v[1], v[2], v[11], v[10]
+    chunks = (len(pixels) + LISTED_PER_TASK - 1) // LISTED_PER_TASK
+    for c in nb.prange(chunks):
+        stack, packet = new_stack(depth), new_packet(depth)
+        for i in range(c * LISTED_PER_TASK, min(len(pixels), (c + 1) * LISTED_PER_TASK)):
+            v = path_pixel(
+                bvh, sc, cam, width, height, pixels[i], first[i], counts[i], stride, seed,
+                sequence, qfirst[i], eps, False, emission, grid, stack, packet,
+            )  # fmt: skip
+            out[i, 0], out[i, 1], out[i, 2], sq[i], bad[i] = v[0], v[1], v[2], v[11], v[10]
     return bad.sum()
 
 

@@ -18,6 +18,12 @@ def next_surface(bvh, sc, ox, oy, oz, dx, dy, dz, stack):
     arrived on the triangle's front side (outside a dielectric; the side an emitter lights).
     """
     t, tri = closest_hit(bvh, ox, oy, oz, dx, dy, dz, np.inf, stack)
+    return surface_at(sc, ox, oy, oz, dx, dy, dz, t, tri)
+
+
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def surface_at(sc, ox, oy, oz, dx, dy, dz, t, tri):
+    """`next_surface`'s tuple for the ray's closest hit (t, triangle or -1), traced already."""
     if tri < 0:
         return tri, t, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0.0, False
     nx, ny, nz = sc.normals[tri, 0], sc.normals[tri, 1], sc.normals[tri, 2]

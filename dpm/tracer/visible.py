@@ -124,15 +124,13 @@ def camera_sample(bvh, sc, cam, width, height, x, y, sx, sy, stream, seed, eps, 
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
-def camera_sample_lean(bvh, sc, cam, width, height, x, y, sx, sy, stream, seed, eps, stack):
-    """`camera_sample`, the same values, with the chain through mirrors and glass called
+def lean_from(bvh, sc, dx, dy, dz, hit, stream, seed, eps, stack):
+    """`chain_from`, the same values, with the chain through mirrors and glass called
     (`camera_chain`) rather than inlined: a miss or a diffuse first hit returns at once. In
     `path_pixel`, which inlines the path's shading too, the inlined chain made the kernel
     larger and slower (`pt` on the ring 4.9-6.1 M samples/s, varying from process to
     process, against 6.3-6.4); where the camera sample is all a kernel does
     (`visible_pixel`), the call made it slower (16.8 against 9.0)."""
-    dx, dy, dz = camera_ray(cam, width, height, x + sx, y + sy)
-    hit = next_surface(bvh, sc, cam[0, 0], cam[0, 1], cam[0, 2], dx, dy, dz, stack)
     tri, _, px, py, pz, nx, ny, nz, m, cos_i, front = hit
     z = 0.0
     if tri < 0:
