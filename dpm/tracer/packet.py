@@ -28,13 +28,10 @@ from dpm.tracer.bvh import LEAF_BITS, REFS, WIDTH
 from dpm.tracer.traverse import (
     _COUNT,
     _CULL_SCALE,
-    _MAX_SCALE,
-    _MIN_SCALE,
     _ROUND_SLACK,
-    _SHRINK,
+    _axis_constants,
     _bits32,
     _dominant_axis,
-    _float32_down,
     _float32_up,
     _lowest_bit,
     _or_all,
@@ -45,6 +42,7 @@ from dpm.tracer.traverse import (
     new_stack,
     pick,
     ray_setup_inverse,
+    watertight_ir,
 )
 
 LANES = 16  # rays per packet: one AVX-512 register of float32 box distances
@@ -174,36 +172,15 @@ def _leaf_lanes_codegen(context, builder, sig, args):
         z = pz(ax, ay, az)
         sheared.append((builder.fadd(px(ax, ay, az), builder.fmul(sx, z)),
                         builder.fadd(py(ax, ay, az), builder.fmul(sy, z)), z))  # fmt: skip
-    (a_x, a_y, a_z), (b_x, b_y, b_z), (c_x, c_y, c_z) = sheared
-    e0 = builder.fsub(builder.fmul(b_x, c_y), builder.fmul(b_y, c_x))
-    e1 = builder.fsub(builder.fmul(c_x, a_y), builder.fmul(c_y, a_x))
-    e2 = builder.fsub(builder.fmul(a_x, b_y), builder.fmul(a_y, b_x))
     zero = ir.Constant(vd, [0.0] * LANES)
-
-    def cmp(op, x, y):
-        return builder.fcmp_ordered(op, x, y)
-
-    def any3(op):
-        return builder.or_(builder.or_(cmp(op, e0, zero), cmp(op, e1, zero)), cmp(op, e2, zero))
-
-    miss = builder.and_(any3("<"), any3(">"))
-    det = builder.fadd(builder.fadd(e0, e1), e2)
-    miss = builder.or_(miss, cmp("==", det, zero))
-    tsum = builder.fadd(builder.fadd(builder.fmul(e0, a_z), builder.fmul(e1, b_z)),
-                        builder.fmul(e2, c_z))  # fmt: skip
-    ts = builder.fmul(sz, tsum)
-    td = builder.fmul(best_t, det)
-    neg = builder.or_(cmp(">=", ts, zero), cmp("<", ts, td))
-    pos = builder.or_(cmp("<=", ts, zero), cmp(">", ts, td))
-    miss = builder.or_(miss, builder.and_(cmp("<", det, zero), neg))
-    miss = builder.or_(miss, builder.and_(cmp(">", det, zero), pos))
+    miss, ts, det = watertight_ir(builder, sheared, sz, best_t, zero)
     t = builder.fdiv(ts, det)
     lane = ir.Constant(vl, list(range(LANES)))
     on = builder.icmp_signed("!=", builder.and_(builder.lshr(splat_l(mask), lane), one_l), zero_l)
     index = splat_l(i)
     nearer = builder.or_(
-        cmp("<", t, best_t),
-        builder.and_(cmp("==", t, best_t), builder.icmp_signed("<", index, best)),
+        builder.fcmp_ordered("<", t, best_t),
+        builder.and_(builder.fcmp_ordered("==", t, best_t), builder.icmp_signed("<", index, best)),
     )
     better = builder.and_(builder.and_(on, builder.not_(miss)), nearer)
     builder.store(builder.select(better, t, best_t), ptr(9, vd), align=8)
@@ -256,26 +233,10 @@ def new_packet(depth):
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
-def _axis_lanes(o, inv):
-    """`_axis_constants` with selects for branches, so that a loop over lanes vectorizes."""
-    near = np.float32(inv * (1.0 - _SHRINK))
-    far = np.float32(inv * (1.0 + _SHRINK))
-    near_term = _float32_up(o * np.float64(near))
-    far_term = _float32_down(o * np.float64(far))
-    size = abs(inv)
-    keep = ((size >= _MIN_SCALE) & (size <= _MAX_SCALE) & (abs(o) * size <= _MAX_SCALE)) | (
-        size == np.inf
-    )
-    nan = np.float32(np.nan)
-    return (near if keep else nan, near_term if keep else nan, far if keep else nan,
-            far_term if keep else nan)  # fmt: skip
-
-
-@nb.njit(cache=True, inline="always", error_model="numpy")
 def _axis_rows(rc, r, o, d):
     """Rows r … r + 3·LANES of rc: one axis's `box_constants` for each lane."""
     for j in range(LANES):
-        a, b, c, e = _axis_lanes(o[j], 1.0 / d[j])
+        a, b, c, e = _axis_constants(o[j], 1.0 / d[j])
         rc[r + j], rc[r + LANES + j], rc[r + 2 * LANES + j], rc[r + 3 * LANES + j] = a, b, c, e
 
 
@@ -328,6 +289,15 @@ def _count(mask):
     return n
 
 
+@nb.njit(cache=True, inline="always", error_model="numpy")
+def _leaf(verts, ref, mask, ox, oy, oz, kx, ky, kz, sx, sy, sz, best_t, best, far):
+    """Every triangle of leaf reference ref against the lanes of mask (`_leaf_lanes`)."""
+    code = ~ref
+    first = code >> LEAF_BITS
+    for c in range(code & _COUNT):
+        _leaf_lanes(verts, first + c, mask, ox, oy, oz, kx, ky, kz, sx, sy, sz, best_t, best, far)
+
+
 @nb.njit(cache=True, inline="always", _nrt=False, error_model="numpy")
 def closest_packet(bvh, packet, active, tmax, single, out_t, out_tri):
     """Closest hits in (0, tmax[j]) of the rays in `packet`'s lanes j of bitmask active:
@@ -375,11 +345,7 @@ def closest_packet(bvh, packet, active, tmax, single, out_t, out_tri):
                 stack[j, 0], stack[j, 1], stack[j, 2] = kids[ref, REFS + c], lanes, d
                 sp += 1
         else:
-            code = ~ref
-            first = code >> LEAF_BITS
-            for c in range(code & _COUNT):
-                _leaf_lanes(verts, first + c, mask, ox, oy, oz, kx, ky, kz, sx, sy, sz, best_t,
-                            best, far)  # fmt: skip
+            _leaf(verts, ref, mask, ox, oy, oz, kx, ky, kz, sx, sy, sz, best_t, best, far)
     for j in range(LANES):
         hit = best[j] >= 0
         out_t[j] = best_t[j] if hit else np.inf
@@ -418,12 +384,8 @@ def any_packet(bvh, packet, active, tmax, single):
                 stack[sp, 0], stack[sp, 1] = kids[ref, REFS + c], out[c]
                 sp += 1
         else:
-            code = ~ref
-            first = code >> LEAF_BITS
-            for c in range(code & _COUNT):
-                # a hit strictly before tmax sets best (tie rule: best is -1, so t < tmax)
-                _leaf_lanes(verts, first + c, mask, ox, oy, oz, kx, ky, kz, sx, sy, sz, best_t,
-                            best, far)  # fmt: skip
+            # a hit strictly before tmax sets best (the tie rule's best is -1: t < tmax)
+            _leaf(verts, ref, mask, ox, oy, oz, kx, ky, kz, sx, sy, sz, best_t, best, far)
             for j in range(LANES):
                 if best[j] >= 0 and (mask >> j) & 1:
                     blocked |= 1 << j

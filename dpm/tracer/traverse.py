@@ -219,6 +219,26 @@ def _leaf_test_codegen(context, builder, sig, args):
         sheared.append(
             (builder.fadd(ex, builder.fmul(fsx, ez)), builder.fadd(ey, builder.fmul(fsy, ez)), ez)
         )
+    miss, tscaled, det = watertight_ir(builder, sheared, fsz, ftmax, zero)
+    lane = ir.Constant(ir.VectorType(i64, LEAF_LANES), list(range(LEAF_LANES)))
+    counts = builder.insert_element(
+        ir.Constant(ir.VectorType(i64, LEAF_LANES), ir.Undefined), count, ir.Constant(i32, 0)
+    )
+    counts = builder.shuffle_vector(
+        counts, counts, ir.Constant(ir.VectorType(i32, LEAF_LANES), [0] * LEAF_LANES)
+    )
+    live = builder.icmp_signed("<", lane, counts)
+    hit = builder.and_(live, builder.not_(miss))
+    mask = builder.uitofp(builder.zext(builder.bitcast(hit, ir.IntType(LEAF_LANES)), i64), f64)
+    lanes = [builder.extract_element(v, ir.Constant(i32, c)) for v in (tscaled, det)
+             for c in range(LEAF_LANES)]  # fmt: skip
+    return context.make_tuple(builder, sig.return_type, [mask, *lanes])
+
+
+def watertight_ir(builder, sheared, sz, tmax, zero):
+    """LLVM IR of `hit_triangle` after the shear, on vectors of lanes: (miss mask, t·det,
+    det). sheared holds the three vertices' (x, y, z) relative to the origin, sheared;
+    sz, tmax and zero are vectors; the operations are `hit_triangle`'s, in its order."""
     (a_x, a_y, a_z), (b_x, b_y, b_z), (c_x, c_y, c_z) = sheared
     e0 = builder.fsub(builder.fmul(b_x, c_y), builder.fmul(b_y, c_x))
     e1 = builder.fsub(builder.fmul(c_x, a_y), builder.fmul(c_y, a_x))
@@ -236,25 +256,13 @@ def _leaf_test_codegen(context, builder, sig, args):
     tsum = builder.fadd(
         builder.fadd(builder.fmul(e0, a_z), builder.fmul(e1, b_z)), builder.fmul(e2, c_z)
     )
-    tscaled = builder.fmul(fsz, tsum)
-    tdet = builder.fmul(ftmax, det)
+    tscaled = builder.fmul(sz, tsum)
+    tdet = builder.fmul(tmax, det)
     neg = builder.or_(cmp(">=", tscaled, zero), cmp("<", tscaled, tdet))
     pos = builder.or_(cmp("<=", tscaled, zero), cmp(">", tscaled, tdet))
     miss = builder.or_(miss, builder.and_(cmp("<", det, zero), neg))
     miss = builder.or_(miss, builder.and_(cmp(">", det, zero), pos))
-    lane = ir.Constant(ir.VectorType(i64, LEAF_LANES), list(range(LEAF_LANES)))
-    counts = builder.insert_element(
-        ir.Constant(ir.VectorType(i64, LEAF_LANES), ir.Undefined), count, ir.Constant(i32, 0)
-    )
-    counts = builder.shuffle_vector(
-        counts, counts, ir.Constant(ir.VectorType(i32, LEAF_LANES), [0] * LEAF_LANES)
-    )
-    live = builder.icmp_signed("<", lane, counts)
-    hit = builder.and_(live, builder.not_(miss))
-    mask = builder.uitofp(builder.zext(builder.bitcast(hit, ir.IntType(LEAF_LANES)), i64), f64)
-    lanes = [builder.extract_element(v, ir.Constant(i32, c)) for v in (tscaled, det)
-             for c in range(LEAF_LANES)]  # fmt: skip
-    return context.make_tuple(builder, sig.return_type, [mask, *lanes])
+    return miss, tscaled, det
 
 
 @intrinsic
@@ -416,9 +424,9 @@ def _axis_constants(o, inv):
         size == np.inf  # a zero direction component: see above
     )
     nan = np.float32(np.nan)
-    if not keep:
-        near, near_term, far, far_term = nan, nan, nan, nan
-    return near, near_term, far, far_term
+    # selects, not a branch: a loop over a packet's lanes vectorizes (`dpm.tracer.packet`)
+    return (near if keep else nan, near_term if keep else nan, far if keep else nan,
+            far_term if keep else nan)  # fmt: skip
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
