@@ -235,3 +235,16 @@ def test_keep_best_writes_the_weights_of_the_least_validation_loss(tmp_path: Pat
     assert saved() == 1
     again.offer(0.0, params[0])
     assert saved() == 0
+    # keep_best turned on mid-run (no file): the restored params, at their own step's loss
+    # only if that step was validated (an earlier row's loss belongs to other weights)
+    path.unlink()
+    late = Best(path, ModelConfig("caustic", 24, 1))
+    late.resume([{"validation_loss": "0.5"}, {"validation_loss": ""}], params[3])
+    assert saved() == 3
+    late.offer(2.0, params[2])  # beats the restored params, whose loss is unknown
+    assert saved() == 2
+    path.unlink()
+    late = Best(path, ModelConfig("caustic", 24, 1))
+    late.resume([{"validation_loss": ""}, {"validation_loss": "1.5"}], params[3])
+    late.offer(2.0, params[2])
+    assert saved() == 3

@@ -191,13 +191,20 @@ class Best:
             save_weights(self.path, Weights(m.architecture, m.width, m.k, params))
 
     def resume(self, rows: list[dict], params: dict) -> None:
-        """Take the least validation loss of a resumed run's rows (saving the restored params
-        as the best when the file is missing: a run that predates the option)."""
+        """Take the least validation loss of a resumed run's rows (rows[-1] being the
+        restored params' step). Where the file is missing (a run that predates the option,
+        or had it off), the restored params become the best so far, at their own step's
+        loss if that step was validated, else at none (the next validation replaces them)."""
         values = [float(r["validation_loss"]) for r in rows if r["validation_loss"]]
         if self.path.exists() and values:
             self.value = min(values)
-        else:
-            self.offer(values[-1] if values else float("inf"), params)
+            return
+        own = rows[-1]["validation_loss"] if rows else ""
+        m = self.model
+        save_weights(
+            self.path, Weights(m.architecture, m.width, m.k, jax.tree.map(np.asarray, params))
+        )
+        self.value = float(own) if own else float("inf")
 
 
 def _raise_interrupt(signum: int, frame: object) -> None:
