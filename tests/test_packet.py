@@ -76,3 +76,14 @@ def test_bad_rays_leave_their_packet_alone() -> None:
     d[LANES + 2] = 0.0
     o, d = o[:-5], d[:-5]  # the last packet is not full
     assert_packets_match_single(tri, o, d, np.inf)
+
+
+@pytest.mark.parametrize("spread", [0.01, 0.3])
+def test_coincident_triangles_tie_the_same_way(spread: float) -> None:
+    """Every triangle twice (a copy in another leaf, often), so every hit is an exact tie:
+    the packet and the single ray, visiting leaves in different orders, still agree."""
+    rng = np.random.default_rng(11)
+    soup = random_soup(rng, 400)
+    tri = np.concatenate([soup, soup[rng.permutation(len(soup))]])
+    o, d = coherent_rays(rng, 400, spread)
+    assert_packets_match_single(tri, o, d, np.inf)

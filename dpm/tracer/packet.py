@@ -29,6 +29,7 @@ from dpm.tracer.traverse import (
     _COUNT,
     _CULL_SCALE,
     _ROUND_SLACK,
+    _TIE_SCALE,
     _axis_constants,
     _bits32,
     _dominant_axis,
@@ -68,7 +69,7 @@ def _packet_node_codegen(context, builder, sig, args):
     """LLVM IR of `_packet_node`: per child, `hit_box` on LANES float32 lanes at once."""
     f32, i8, i32, i64 = ir.FloatType(), *map(ir.IntType, (8, 32, 64))
     vf, splat = _vector_helpers(builder, f32)
-    vi = ir.VectorType(i32, LANES)
+    vi, splat_i = _vector_helpers(builder, i32)
     bounds = context.make_array(sig.args[0])(context, builder, args[0])
     node = context.cast(builder, args[1], sig.args[1], types.int64)
     rc = context.make_array(sig.args[2])(context, builder, args[2])
@@ -102,6 +103,10 @@ def _packet_node_codegen(context, builder, sig, args):
                      builder.fneg(ft)))  # fmt: skip
     tmax = builder.load(builder.bitcast(far.data, vf.as_pointer()), align=4)
     inf = ir.Constant(vf, [float("inf")] * LANES)
+    # the lanes of mask, as a vector of booleans: only they count (bits and least distances)
+    bit = ir.Constant(vi, [1 << lane for lane in range(LANES)])
+    lanes_on = builder.and_(splat_i(builder.trunc(mask, i32)), bit)
+    on = builder.icmp_unsigned("!=", lanes_on, ir.Constant(vi, [0] * LANES))
     entered = ir.Constant(i64, 0)
     for c in range(WIDTH):
         t0, t1 = zero, tmax
@@ -112,8 +117,8 @@ def _packet_node_codegen(context, builder, sig, args):
             farther = builder.call(fma, [builder.select(neg, lo, hi), fs, ft])
             t0 = builder.select(builder.fcmp_ordered(">", near, t0), near, t0)
             t1 = builder.select(builder.fcmp_ordered("<", farther, t1), farther, t1)
-        hit = builder.fcmp_ordered("<=", t0, t1)
-        m = builder.and_(builder.zext(builder.bitcast(hit, ir.IntType(LANES)), i64), mask)
+        hit = builder.and_(builder.fcmp_ordered("<=", t0, t1), on)
+        m = builder.zext(builder.bitcast(hit, ir.IntType(LANES)), i64)
         least = builder.call(umin, [builder.bitcast(builder.select(hit, t0, inf), vi)])
         builder.store(m, builder.gep(out, [ir.Constant(i64, c)]))
         builder.store(builder.zext(least, i64), builder.gep(out, [ir.Constant(i64, WIDTH + c)]))
@@ -126,7 +131,8 @@ def _packet_node_codegen(context, builder, sig, args):
 def _packet_node(typingctx, bounds, node, rc, far, mask, out):
     """Bit c set where a lane of mask enters child c of node record `node` before its far
     (LANES float32); out[c] (int64) gets those lanes, out[WIDTH + c] the `_bits32` of their
-    least entry distance. rc holds the lanes' `box_constants`, row r at r·LANES."""
+    (those lanes') least entry distance. rc holds the lanes' `box_constants`, row r at
+    r·LANES."""
     sig = types.int64(bounds, node, rc, far, mask, out)
     return sig, _packet_node_codegen
 
@@ -173,7 +179,9 @@ def _leaf_lanes_codegen(context, builder, sig, args):
         sheared.append((builder.fadd(px(ax, ay, az), builder.fmul(sx, z)),
                         builder.fadd(py(ax, ay, az), builder.fmul(sy, z)), z))  # fmt: skip
     zero = ir.Constant(vd, [0.0] * LANES)
-    miss, ts, det = watertight_ir(builder, sheared, sz, best_t, zero)
+    # the limit loosened by _TIE_SCALE, as `closest_below`'s, so equal hits reach the tie rule
+    loose = builder.fmul(best_t, ir.Constant(vd, [_TIE_SCALE] * LANES))
+    miss, ts, det = watertight_ir(builder, sheared, sz, loose, zero)
     t = builder.fdiv(ts, det)
     lane = ir.Constant(vl, list(range(LANES)))
     on = builder.icmp_signed("!=", builder.and_(builder.lshr(splat_l(mask), lane), one_l), zero_l)

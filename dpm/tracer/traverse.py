@@ -46,6 +46,11 @@ _ROUND_SLACK = 2.0**-23  # float64 → float32 roundings that must go one way: t
 # edge can give distances a few ulps apart for the same point, and the nearer one must still be
 # found however the boxes split them, so the BVH returns the brute-force minimum.
 _CULL_SCALE = 1.0 + 2.0**-32
+# A closest-hit leaf test admits hits up to this factor beyond the nearest so far: the
+# watertight test's t·det against tmax·det can reject a hit at exactly t = tmax (about one
+# time in twenty), and equal hits must reach the tie rule (the lower triangle wins) for the
+# result not to depend on the order leaves are visited in; t < tmax decides after it.
+_TIE_SCALE = 1.0 + 2.0**-40
 _COUNT = (1 << LEAF_BITS) - 1  # mask of a leaf reference's triangle count
 SPAWN_OFFSET = 1e-6  # new rays start this fraction of the scene diagonal off their surface
 RAYS_PER_TASK = 256  # rays each parallel task traces with one traversal stack
@@ -506,8 +511,9 @@ def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
 @nb.njit(cache=True, inline="always", _nrt=False, error_model="numpy")
 def closest_below(bvh, start, ray, planes_at, k, o, s, best_t, best, stack):
     """(t, BVH-order triangle) of the nearest hit below node reference `start` nearer than
-    (best_t, best), or (best_t, best) itself; of hits at equal t the lower triangle wins,
-    so the result does not depend on the order subtrees are visited in.
+    (best_t, best), or (best_t, best) itself; of hits at equal t the lower triangle wins
+    (each leaf test admitting hits a little beyond best_t, `_TIE_SCALE`, so that equal ones
+    reach that rule), so the result does not depend on the order subtrees are visited in.
 
     The ray is given by its `box_constants` ray, `_planes` planes_at, and its watertight
     constants: axes k = (kx, ky, kz), origin coordinates o along them, shear s (sx, sy, sz).
@@ -560,7 +566,8 @@ def closest_below(bvh, start, ray, planes_at, k, o, s, best_t, best, stack):
         else:
             code = ~ref
             first = code >> LEAF_BITS
-            hits = _leaf_test(planes, first, code & _COUNT, kx, ky, kz, *o, sx, sy, sz, best_t)
+            loose = best_t * _TIE_SCALE
+            hits = _leaf_test(planes, first, code & _COUNT, kx, ky, kz, *o, sx, sy, sz, loose)
             m = int(hits[0])
             if m != 0:
                 while m != 0:
