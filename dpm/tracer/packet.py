@@ -240,6 +240,14 @@ def new_packet(depth):
     return f64, i64, rc, far, stack, io
 
 
+@nb.njit(cache=True, inline="always")
+def put_ray(rays, limits, j, ox, oy, oz, dx, dy, dz, tmax):
+    """Lane j of a packet's rays (`new_packet`'s first tuple, rays[0:6]) and of limits."""
+    rays[0][j], rays[1][j], rays[2][j] = ox, oy, oz
+    rays[3][j], rays[4][j], rays[5][j] = dx, dy, dz
+    limits[j] = tmax
+
+
 @nb.njit(cache=True, inline="always", error_model="numpy")
 def _axis_rows(rc, r, o, d):
     """Rows r … r + 3·LANES of rc: one axis's `box_constants` for each lane."""
@@ -408,19 +416,16 @@ def _load(packet, origins, directions, tmax, first, n, limit):
     """Rays first … first + LANES - 1 of (R, 3) arrays into packet's lanes, tmax (R,) or
     (1,) into limit; returns the bitmask of lanes holding a traceable ray, and the
     `_ray_flags` of those that are not."""
-    ox, oy, oz, dx, dy, dz = packet[0][:6]
     active, flags = 0, 0
     for j in range(LANES):
         r = first + j
-        ox[j], oy[j], oz[j], dx[j], dy[j], dz[j] = 0.0, 0.0, 0.0, 1.0, 1.0, 1.0
-        limit[j] = 0.0
+        put_ray(packet[0], limit, j, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0)
         if r < n:
             x, y, z, a, b, c = _ray(origins, directions, r)
             bad = _ray_flags(x, y, z, a, b, c)
             flags |= bad
             if not bad:
-                ox[j], oy[j], oz[j], dx[j], dy[j], dz[j] = x, y, z, a, b, c
-                limit[j] = tmax[r if tmax.shape[0] > 1 else 0]
+                put_ray(packet[0], limit, j, x, y, z, a, b, c, tmax[r if tmax.shape[0] > 1 else 0])
                 active |= 1 << j
     return active, flags
 
@@ -442,7 +447,7 @@ def _closest_task(bvh, depth, origins, directions, tmax, out_t, out_tri, task):
     on the inlined traversal)."""
     n = origins.shape[0]
     packet, single = new_packet(depth), new_stack(depth)
-    limit, t, tri = np.empty(LANES), np.empty(LANES), np.empty(LANES, np.int64)
+    limit, t, tri, _ = packet[5]
     flags = 0
     for first in range(task * TASK_RAYS, min(n, (task + 1) * TASK_RAYS), LANES):
         active, bad = _load(packet, origins, directions, tmax, first, n, limit)
@@ -471,7 +476,7 @@ def _any_task(bvh, depth, origins, directions, tmax, out, task):
     """One task of `any_hit_packets`."""
     n = origins.shape[0]
     packet, single = new_packet(depth), new_stack(depth)
-    limit = np.empty(LANES)
+    limit = packet[5][0]
     flags = 0
     for first in range(task * TASK_RAYS, min(n, (task + 1) * TASK_RAYS), LANES):
         active, bad = _load(packet, origins, directions, tmax, first, n, limit)

@@ -25,7 +25,7 @@ from dpm.tracer.lights import (
     sample_light_point,
     sample_light_stratified,
 )
-from dpm.tracer.packet import LANES, closest_packet, new_packet
+from dpm.tracer.packet import LANES, closest_packet, new_packet, put_ray
 from dpm.tracer.photon_grid import PhotonGrid, grid_irradiance
 from dpm.tracer.sampling import pixel_sequence, sample_cosine, stratified2, uniform
 from dpm.tracer.surface import albedo_at, next_surface, surface_at
@@ -284,7 +284,7 @@ def path_pixel(
     sr = sg = sb = gr = gg = gb = hx = hy = hz = sq = 0.0
     hits = bad = 0
     ox, oy, oz = cam[0, 0], cam[0, 1], cam[0, 2]
-    po, pd = packet[0][:3], packet[0][3:6]
+    pd = packet[0][3:6]  # the camera rays' directions, read back after the packet
     limit, hit_t, hit_tri, _ = packet[5]
     for s0 in range(0, spp, LANES):
         lanes = min(LANES, spp - s0)
@@ -296,9 +296,8 @@ def path_pixel(
                 sx, sy = stratified2(index, pseq, 0)
             else:
                 sx, sy = uniform(seed, stream, 0), uniform(seed, stream, 1)
-            po[0][j], po[1][j], po[2][j] = ox, oy, oz
-            pd[0][j], pd[1][j], pd[2][j] = camera_ray(cam, width, height, x + sx, y + sy)
-            limit[j] = np.inf
+            dx, dy, dz = camera_ray(cam, width, height, x + sx, y + sy)
+            put_ray(packet[0], limit, j, ox, oy, oz, dx, dy, dz, np.inf)
         closest_packet(bvh, packet, (1 << lanes) - 1, limit, stack, hit_t, hit_tri)
         for j in range(lanes):
             s = s0 + j

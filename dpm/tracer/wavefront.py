@@ -26,7 +26,7 @@ import math
 import numba as nb
 import numpy as np
 
-from dpm.tracer.packet import LANES, any_packet, closest_packet, new_packet
+from dpm.tracer.packet import LANES, any_packet, closest_packet, new_packet, put_ray
 from dpm.tracer.sampling import (
     pixel_sequence,
     sample_cdf,
@@ -270,14 +270,11 @@ def _trace_closest(bvh, stack, packet, n, go, ox, oy, oz, dx, dy, dz, hit_t, hit
     LANES consecutive such rays: a pixel's paths lie together, and their rays enter the same
     nodes (`dpm.tracer.packet`; the same hits as one ray at a time)."""
     limit, t, tri, at = packet[5]
-    for i in range(LANES):
-        limit[i] = np.inf
-    po, pd = packet[0][:3], packet[0][3:6]
     j = 0
     for k in range(n):
         hit_tri[k] = -1
         if go[k]:
-            _put(po, pd, j, ox[k], oy[k], oz[k], dx[k], dy[k], dz[k])
+            put_ray(packet[0], limit, j, ox[k], oy[k], oz[k], dx[k], dy[k], dz[k], np.inf)
             at[j] = k
             j += 1
         if j == LANES or (k == n - 1 and j > 0):
@@ -292,12 +289,10 @@ def _trace_shadow(bvh, stack, packet, n, test, ox, oy, oz, dx, dy, dz, length):
     """`test` cleared where the segment of the ray up to `length` is occluded (in packets,
     as `_trace_closest`)."""
     limit, _, _, at = packet[5]
-    po, pd = packet[0][:3], packet[0][3:6]
     j = 0
     for k in range(n):
         if test[k] and length[k] > 0:
-            _put(po, pd, j, ox[k], oy[k], oz[k], dx[k], dy[k], dz[k])
-            limit[j] = length[k]
+            put_ray(packet[0], limit, j, ox[k], oy[k], oz[k], dx[k], dy[k], dz[k], length[k])
             at[j] = k
             j += 1
         if j == LANES or (k == n - 1 and j > 0):
@@ -306,13 +301,6 @@ def _trace_shadow(bvh, stack, packet, n, test, ox, oy, oz, dx, dy, dz, length):
                 if (blocked >> i) & 1:
                     test[at[i]] = False
             j = 0
-
-
-@nb.njit(inline="always")
-def _put(po, pd, j, ox, oy, oz, dx, dy, dz):
-    """Lane j of a packet's origins and directions."""
-    po[0][j], po[1][j], po[2][j] = ox, oy, oz
-    pd[0][j], pd[1][j], pd[2][j] = dx, dy, dz
 
 
 @nb.njit(**_STAGE)
