@@ -2,6 +2,7 @@
 
     python benchmarks/caustic_heldout.py WEIGHTS ... [--config configs/caustic.toml]
                                          [--scenes S] [--last N] [--z Z ...]
+                                         [--by-passes]
 
 `dpm-train` reports each run's held-out loss on the last `validation_scenes` scenes of its own
 set, so two runs on sets of different sizes are scored on different scenes. This scores every
@@ -10,7 +11,8 @@ the first S (default: the config's `scenes`) of the config's set (its `out`), at
 count of its ladder, with the config's loss and balance (1.0: the render's caustic without
 the network), through the clamp at each --z standard errors (the training's is
 `TRAIN_CLAMP_Z`, the render's `CLAMP_Z`). A weights file trained on any of those scenes is
-not held out on them: compare only files whose sets stop before them.
+not held out on them: compare only files whose sets stop before them. `--by-passes` adds the
+loss at each pass count of the ladder alone (where in the ladder a filter gains).
 """
 
 from __future__ import annotations
@@ -30,9 +32,15 @@ from dpm.nn.weights import load_weights
 
 
 def heldout_loss(
-    config_path: Path, weights: list[Path], scenes: int, last: int, zs: list[float]
-) -> dict[tuple[str, float], float]:
-    """{(weights file, z): loss} on scenes scenes-last … scenes-1 of the config's caustic set."""
+    config_path: Path,
+    weights: list[Path],
+    scenes: int,
+    last: int,
+    zs: list[float],
+    by_passes: bool = False,
+) -> dict[tuple[str, float, int], float]:
+    """{(weights file, z, passes): loss} on scenes scenes-last … scenes-1 of the config's
+    caustic set; passes 0 is the whole ladder, the others (with `by_passes`) one pass count."""
     config = load_config(config_path)
     manifest = json.loads((Path(config.data.out) / "manifest.json").read_text())
     if not 0 < last <= scenes:
@@ -43,7 +51,12 @@ def heldout_loss(
         raise SystemExit(f"caustic_heldout: {config.data.out} lacks some of scenes "
                          f"{wanted[0]}-{wanted[-1]}")  # fmt: skip
     sampler = CausticSampler(config, manifest, wanted)
-    batch, target, part = sampler.draw(np.random.default_rng(0), len(sampler.choices), 1)
+    batch, target, _ = sampler.draw(np.random.default_rng(0), len(sampler.choices), 1)
+    subsets = {0: np.arange(len(sampler.choices))}
+    if by_passes:
+        for p in sampler.ladder:
+            subsets[p] = np.array([k for k, (_, q) in enumerate(sampler.choices) if q == p])
+    images = target.reshape(len(sampler.choices), -1, 3)
     t, out = config.train, {}
     for path in weights:
         w = load_weights(path)
@@ -51,7 +64,12 @@ def heldout_loss(
         for z in zs:  # the training's own held-out loss, through the clamp at z
             _, loss, _ = make_steps(model, t.learning_rate, t.loss, t.balance,
                                     caustic_estimates(model, z))  # fmt: skip
-            out[(str(path), z)] = float(loss(w.params, batch, target, part))
+            for p, rows in subsets.items():
+                sub = type(batch)(*(field[rows] for field in batch))
+                pixels = images.shape[1]
+                part = np.repeat(np.arange(len(rows), dtype=np.int32), pixels)
+                value = loss(w.params, sub, images[rows].reshape(-1, 3), part)
+                out[(str(path), z, p)] = float(value)
     return out
 
 
@@ -63,12 +81,16 @@ def main() -> None:
     p.add_argument("--scenes", type=int, default=0, help="the set's size (default: scenes)")
     p.add_argument("--last", type=int, default=0, help="scenes (default: validation_scenes)")
     p.add_argument("--z", type=float, nargs="+", default=sorted({TRAIN_CLAMP_Z, CLAMP_Z}))
+    p.add_argument("--by-passes", action="store_true", help="also the loss at each pass count")
     a = p.parse_args()
     config = load_config(a.config)
     last = a.last or config.train.validation_scenes
     scenes = a.scenes or config.data.scenes
-    for (path, z), value in heldout_loss(a.config, a.weights, scenes, last, a.z).items():
-        print(f"{path}  z={z:g}  held-out loss {value:.4f}  (scenes {scenes - last}-{scenes - 1})")
+    losses = heldout_loss(a.config, a.weights, scenes, last, a.z, a.by_passes)
+    for (path, z, passes), value in losses.items():
+        at = f"{passes} passes" if passes else "all passes"
+        print(f"{path}  z={z:g}  {at}  held-out loss {value:.4f}  "
+              f"(scenes {scenes - last}-{scenes - 1})")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -301,6 +301,32 @@ def test_balanced_loss_is_one_for_the_uniform_kernel_and_trains() -> None:
             assert float(loss(params, b, target, part)) < 1.0
 
 
+def test_cosine_schedule_falls_to_no_step_at_the_last() -> None:
+    """`[train] schedule = 'cosine'`: the first step moves the weights as the constant rate's
+    does, and once `steps` steps are taken a step leaves them where they are."""
+    n = 64
+    b = plane_batch(n, 7)
+    target = np.full((n, 3), 0.05, np.float32)
+    model = make_model("dpm", 8)
+    params = init_params(model, K, 0)
+    moved = {}
+    for schedule in ("constant", "cosine"):
+        optimiser, _, step = make_steps(model, 1e-3, "mse", False, schedule=schedule, steps=3)
+        p, state = params, optimiser.init(params)
+        for _ in range(3):
+            p, state, _ = step(p, state, b, target)
+        first = step(params, optimiser.init(params), b, target)[0]
+        moved[schedule] = first
+        after = step(p, state, b, target)[0]
+        still = all(
+            np.array_equal(x, y)
+            for x, y in zip(jax.tree.leaves(p), jax.tree.leaves(after), strict=True)
+        )
+        assert still == (schedule == "cosine")
+    for x, y in zip(*(jax.tree.leaves(moved[k]) for k in ("constant", "cosine")), strict=True):
+        np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=1e-6)
+
+
 def steps_over(devices: DataParallel | None, steps: int = 3) -> list[np.ndarray]:
     """The parameters' leaves after `steps` balanced mse+relmse steps on fixed batches of 64
     points in 4 parts, each batch split over `devices` (None: not sharded)."""
@@ -455,6 +481,7 @@ def test_weight_files_round_trip(tmp_path: Path) -> None:
         ('[data]\nout = "d"\n[train]\nloss = "l1"\n', "loss must be one of"),
         ('[data]\nout = "d"\n[train]\nbalance = 1\n', "balance must be true or false"),
         ('[data]\nout = "d"\n[train]\nclamp_z = 0\n', "clamp_z must be positive"),
+        ('[data]\nout = "d"\n[train]\nschedule = "step"\n', "schedule must be one of"),
         ('[data]\nout = "d"\nworkers = -1\n', "workers must be 0 (one per core)"),
         ('[data]\nout = "d"\nray_address = 6379\n', "ray_address must be a string"),
         ('[data]\nout = "d"\nkind = "images"\n', "kind must be 'points' or 'caustic'"),

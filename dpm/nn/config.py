@@ -29,6 +29,9 @@ class ModelConfig:
     k: int = 50  # nearest photons per visible point
 
 
+SCHEDULES = ("constant", "cosine")  # of the learning rate, `[train] schedule`
+
+
 @dataclass(frozen=True)
 class TrainConfig:
     """How to train (the `[train]` table)."""
@@ -38,6 +41,9 @@ class TrainConfig:
     batch: int = 512  # visible points per step
     scenes_per_batch: int = 4  # training scenes each batch is drawn from
     learning_rate: float = 1e-3  # Adam
+    # 'constant', or 'cosine': the rate falls from learning_rate to 0 over `steps` (a resumed
+    # run follows the same curve: the schedule counts the optimiser's own steps)
+    schedule: str = "constant"
     validation_scenes: int = 1  # the last scenes of the set, held back
     validation_points: int = 4096
     validate_every: int = 100  # steps
@@ -132,6 +138,8 @@ def load_config(path: str | Path) -> Config:
     ):
         raise InputError(f"{path}: [data] passes must be positive, increasing and below "
                          "target_passes")  # fmt: skip
+    if t.schedule not in SCHEDULES:
+        raise InputError(f"{path}: [train] schedule must be one of {list(SCHEDULES)}")
     if not t.clamp_z > 0:
         raise InputError(f"{path}: [train] clamp_z must be positive (got {t.clamp_z})")
     if not d.budgets or min(d.budgets) < 1 or not t.learning_rate > 0:

@@ -49,14 +49,24 @@ DRAW_AHEAD = 2 * DRAW_THREADS
 
 
 def make_steps(
-    model, learning_rate: float, loss_name: str, balance: bool, estimates: Callable | None = None
+    model,
+    learning_rate: float,
+    loss_name: str,
+    balance: bool,
+    estimates: Callable | None = None,
+    schedule: str = "constant",
+    steps: int = 1,
 ) -> tuple[optax.GradientTransformation, Callable, Callable]:
     """The optimiser, a jitted loss(params, batch, target, part) and a jitted training step
     (target: (N, 3) radiance, W/(m² sr); part: the (N,) int32 (scene, budget) pair of each
     point, used when `balance`). The loss is `loss_name` of dpm.nn.losses.LOSSES, divided per
     part by the uniform kernel's (PM-K's) when `balance`. `estimates(params, batch)` gives
-    the (N, 3) radiance of the network and of the uniform kernel (default: DPM's)."""
-    optimiser = optax.adam(learning_rate)
+    the (N, 3) radiance of the network and of the uniform kernel (default: DPM's). `schedule`
+    'cosine' lowers the rate from learning_rate to 0 over `steps` (`[train] schedule`)."""
+    rate = (
+        optax.cosine_decay_schedule(learning_rate, steps) if schedule == "cosine" else learning_rate
+    )
+    optimiser = optax.adam(rate)
     if estimates is None:
         predict = jax.vmap(lambda params, b: point_radiance(model, params, b), (None, 0))
 
@@ -111,7 +121,9 @@ def train(config: Config, progress: bool = True) -> tuple[dict, list[dict]]:
         estimates = shape_estimates(model)
     elif caustic:
         estimates = caustic_estimates(model, t.clamp_z)
-    optimiser, loss, step = make_steps(model, t.learning_rate, t.loss, t.balance, estimates)
+    optimiser, loss, step = make_steps(
+        model, t.learning_rate, t.loss, t.balance, estimates, t.schedule, t.steps
+    )
     params = devices.replicate(init_params(model, m.k, t.seed, m.architecture))
     done, params, opt_state, rows = run.restore(params, devices.replicate(optimiser.init(params)))
     best = Best(run.out / "best.msgpack", m) if t.keep_best else None
