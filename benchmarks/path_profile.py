@@ -10,7 +10,8 @@ and with them every function's name, stay in memory; a cached kernel loads as ob
 with no names), renders once untimed, writes the perf map of every compiled function
 (`/tmp/perf-PID.map`: address, size, name), then samples itself with `perf record -p PID`
 for the duration of one `pt` render of --spp samples per pixel and groups the samples:
-traversal (`closest_hit`, `any_hit`), the path's shading (`path_pixel`, where camera rays,
+traversal (`closest_hit`, `any_hit`, and the stages' packets `_trace_closest`, `_trace_shadow`
+of the diffuse scenes), the path's shading (`path_pixel` or the stages, where camera rays,
 light sampling, BSDFs and the random numbers are inlined), libm (sin/cos of the cosine
 sampling), the OpenMP runtime (a worker spinning or waiting: CPU time, not necessarily
 wall time lost) and the rest. Shares are of the render's CPU samples on all threads.
@@ -43,9 +44,14 @@ from dpm.renderer import RenderOptions, render  # noqa: E402
 FRESH = "DPM_PROFILE_FRESH_CACHE"  # set in the re-executed process: its cache is empty
 
 GROUPS = (  # (label, pattern on the function's or library's name), first match wins
-    ("closest_hit", r"closest_hit"),
-    ("any_hit", r"any_hit"),
-    ("path (shading, camera, sampling)", r"path_pixel|shade|camera_sample"),
+    # the diffuse scenes' stages (wavefront.py) trace their rays in packets inside
+    # `_trace_closest` and `_trace_shadow`; their other stages are the path's own work
+    ("closest_hit", r"closest_hit|closest_packet|_trace_closest"),
+    ("any_hit", r"any_hit|any_packet|_trace_shadow"),
+    (
+        "path (shading, camera, sampling)",
+        r"path_pixel|shade|camera_sample|wavefront\.|lean_from|camera_chain",
+    ),
     ("libm", r"libm[.-]"),
     ("OpenMP runtime", r"libgomp|libomp|libtbb"),
 )
