@@ -150,6 +150,25 @@ def test_a_wide_step_is_kept_when_its_rise_rests_on_photons_that_points_share() 
     assert len(np.unique(ids)) == clusters and len(np.unique(ids[::size])) == clusters
 
 
+def test_blocks_are_numbered_as_numpy_unique_numbers_the_rows() -> None:
+    """block_ids ranks the (side, cube) rows as np.unique(axis=0) does (sorted rows; -0.0
+    and 0.0 one cube; positions that are not finite each a block past the others), so the
+    blocked sums, and with them which steps are dropped, stay as they were."""
+    rng = np.random.default_rng(3)
+    n = 5000
+    position = rng.normal(size=(n, 3))
+    position[rng.random(n) < 0.2, 0] = -0.0
+    position[rng.random(n) < 0.2, 1] = 0.0
+    position[:3] = [[np.nan, 0, 0], [np.inf, 1, 1], [0, 0, 0]]
+    reach = 2.0 ** rng.integers(-4, 1, n) * rng.uniform(0.3, 0.5, n)
+    side = 2.0 ** np.ceil(np.log2(2 * reach))
+    key = np.column_stack([side, np.floor(position / side[:, None])])
+    ok = np.isfinite(key).all(axis=1)
+    want = n + np.arange(n)
+    want[ok] = np.unique(key[ok], axis=0, return_inverse=True)[1].ravel()
+    np.testing.assert_array_equal(block_ids(position, reach), want)
+
+
 def test_a_given_radius_runs_the_method_alone() -> None:
     ppm = PPM(radius=0.05, photons_per_pass=100)
     assert type(ppm.state(4, 0.05)).__name__ == "PPMState"

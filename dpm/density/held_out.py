@@ -75,8 +75,22 @@ def block_ids(position: np.ndarray, reach: np.ndarray) -> np.ndarray:
     ok = np.isfinite(key).all(axis=1)
     ids = len(key) + np.arange(len(key))  # not finite: each alone, numbered past the others
     if ok.any():
-        ids[ok] = np.unique(key[ok], axis=0, return_inverse=True)[1].ravel()
+        ids[ok] = _row_ranks(key[ok])
     return ids
+
+
+def _row_ranks(rows: np.ndarray) -> np.ndarray:
+    """(n,) int64 rank of each row of rows (n, m) among the distinct rows in lexicographic
+    order: `np.unique(rows, axis=0, return_inverse=True)[1]`, which sorts the rows as records
+    and took a second a pass for a million visible points; one lexsort takes a tenth."""
+    order = np.lexsort(rows.T[::-1])
+    ordered = rows[order]
+    new = np.empty(len(rows), bool)
+    new[0] = True
+    new[1:] = (ordered[1:] != ordered[:-1]).any(axis=1)
+    ranks = np.empty(len(rows), np.int64)
+    ranks[order] = np.cumsum(new) - 1
+    return ranks
 
 
 class Found:
