@@ -13,7 +13,7 @@ at closeup_caustic's focus the halves of 512 passes agreed on 23.6 where renders
 passes gave 27.5 (the radius shrinks as passes^-1/6, the blur as passes^-1/3), and a render
 longer than its reference was scored against the reference's blur (16-s renders there ran
 1121 passes). So each unseen scene gets PASSES[name]: at least 4 times the passes of the
-longest 16-s render of `caustic_network.py` (its equal-time table of 2026-11-26), 512 where
+longest 16-s render of `caustic_network.py` (its equal-time table of 2026-11-28), 512 where
 that is more; `--passes` overrides it. What bias is left favours the estimate whose blur
 is nearer the reference's, the render without the network more often than not.
 
@@ -50,10 +50,11 @@ SCALED = ("spheres_s0p01", "spheres_s100")  # copies of spheres_s1, scored again
 MAX_WIDTH = 256
 SEEDS = (1001, 1002)
 DEFAULT_PASSES = 512
-PASSES = {  # 4x the passes of the longest 16-s render (caustic_network.md, 2026-11-26)
-    "closeup_caustic": 4500, "far_camera": 6400, "tinted_glass": 3400, "prism_slab": 3200,
-    "concave_mirror": 2100, "tall_vase": 2300, "spheres_s1": 2048, "cardioid_cup": 1200,
-    "lens_wall": 1200, "far_wall": 800, "huge_floor": 700,
+PASSES = {  # 4x the passes of the longest 16-s render (caustic_network.md, 2026-11-28)
+    "far_camera": 16700, "closeup_caustic": 14900, "tinted_glass": 8300, "prism_slab": 7300,
+    "huge_floor": 6800, "concave_mirror": 5300, "tall_vase": 4600, "spheres_s1": 4500,
+    "far_wall": 4000, "cardioid_cup": 3300, "lens_wall": 2700, "glass_lantern": 2000,
+    "bumpy_blob": 1100, "water_tiles": 900,
 }  # fmt: skip
 
 
