@@ -7,23 +7,43 @@ short render's fixed cost; these are the only parts of it a render calls.
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 
 
+@nb.njit(cache=True)
+def _running_mean(line: np.ndarray, size: int) -> np.ndarray:
+    """(pre, n − size + 1, post) float64 running means of `size` samples along the middle axis
+    of line (pre, n, post) float64, in scipy's order of operations: the first window summed in
+    order, then each step adds (entering − leaving), and each sum ÷ size."""
+    pre, length, post = line.shape
+    n = length - size + 1
+    out = np.empty((pre, n, post))
+    s = np.empty(post)
+    for p in range(pre):
+        s[:] = line[p, 0]
+        for k in range(1, size):
+            for j in range(post):
+                s[j] = s[j] + line[p, k, j]
+        for j in range(post):
+            out[p, 0, j] = s[j] / size
+        for i in range(1, n):
+            for j in range(post):
+                s[j] = s[j] + (line[p, i + size - 1, j] - line[p, i - 1, j])
+                out[p, i, j] = s[j] / size
+    return out
+
+
 def _mean_along(a: np.ndarray, size: int, axis: int, mode: str) -> np.ndarray:
-    """scipy's running mean of `size` samples along one axis, in float64, in its order of
-    operations: the first window summed in order, then each step adds (entering − leaving),
-    and each sum ÷ size."""
+    """scipy's running mean of `size` samples along one axis of a, in float64 (Numba: the
+    NumPy form of the same sums took 3 ms a call at 256², 14 calls a caustic estimate)."""
     lo = size // 2
     pad = [(0, 0)] * a.ndim
     pad[axis] = (lo, size - lo - 1)
     line = np.pad(a.astype(np.float64), pad, mode="edge" if mode == "nearest" else "constant")
-    line = np.moveaxis(line, axis, 0)
-    n = line.shape[0] - size + 1
-    steps = np.empty((n, *line.shape[1:]))
-    steps[0] = np.add.accumulate(line[:size], axis=0)[-1]
-    steps[1:] = line[size:] - line[: n - 1]
-    return np.moveaxis(np.add.accumulate(steps, axis=0) / size, 0, axis)
+    pre, post = int(np.prod(line.shape[:axis])), int(np.prod(line.shape[axis + 1 :]))
+    out = _running_mean(line.reshape(pre, line.shape[axis], post), size)
+    return out.reshape(a.shape)
 
 
 def box_mean(a: np.ndarray, size: int | tuple[int, ...], mode: str = "constant") -> np.ndarray:

@@ -20,9 +20,11 @@ from test_truths import mirror_scene
 from conftest import write_scene
 from dpm import load_scene
 from dpm.caustic import forward as caustic_forward
+from dpm.caustic.halves import PassHalves
 from dpm.caustic.stats import CLAMP_Z, DILATIONS, CausticStats, candidates, features
 from dpm.density.base import luminance
 from dpm.errors import InputError
+from dpm.estimators.ppm import PPMState
 from dpm.methods.auto import Auto, Passes
 from dpm.metrics import rmse
 from dpm.nn.caustic_net import CausticNet, example_features, filter_caustics
@@ -248,3 +250,59 @@ def test_keep_best_writes_the_weights_of_the_least_validation_loss(tmp_path: Pat
     late.resume([{"validation_loss": ""}, {"validation_loss": "1.5"}], params[3])
     late.offer(2.0, params[2])
     assert saved() == 3
+
+
+def test_the_halves_hold_what_each_pass_gathered_alone() -> None:
+    # PPM statistics after random passes: the halves' sums are each pass's own flux over its
+    # own disc's area, and α·(photons found), whatever the radii shrank to since
+    rng = np.random.default_rng(3)
+    n = 50
+    states = (PPMState.start(n, rng.uniform(0.5, 1.0, n)), PPMState.start(n, 0.3))
+    halves = PassHalves.start(2, n)
+    want = np.zeros((2, 2, n, 3))
+    found = np.zeros((2, 2, n))
+    for j in range(7):
+        before = PassHalves.snapshot(states)
+        for k, s in enumerate(states):
+            point = rng.integers(0, n, 40 + 10 * k)
+            flux = rng.uniform(0.0, 2.0, (len(point), 3))
+            want[j % 2, k] += np.stack(
+                [np.bincount(point, flux[:, c], minlength=n) for c in range(3)], 1
+            ) / (np.pi * s.radius[:, None] ** 2)  # fmt: skip
+            found[j % 2, k] += np.bincount(point, minlength=n)
+            s.update(point, flux)
+            s.paths += 100
+        halves.add(j % 2, before, states, 100)
+    assert np.allclose(halves.flux, want, rtol=1e-9, atol=1e-12)
+    assert np.allclose(halves.found, found)
+    assert list(halves.paths) == [400, 300] and list(halves.passes) == [4, 3]
+    # the half's state reads its flux over its paths, at the full run's radii
+    half = halves.state(1, 0, states[0])
+    assert np.allclose(half.irradiance(), want[1, 0] / 300)
+    assert np.array_equal(half.radius, states[0].radius)
+
+
+def weight_of(scene, passes: int, filtered, monkeypatch) -> float:
+    """auto's weight for a filter whose output is filtered(stats) (P, 3), after `passes`."""
+    c = scene.camera
+    o = RenderOptions(component="caustic", spp=passes, photons=passes * 4 * c.width * c.height,
+                      seed=1, network=True, progress=False)  # fmt: skip
+    run = Passes(Auto(scene, o), build_bvh(scene), c, Stopwatch(), 0.0)
+    for _ in range(passes):
+        run.run_pass()
+    monkeypatch.setattr(caustic_forward, "filter_caustics", lambda _, s: filtered(s))
+    return run.network_weight()
+
+
+def test_the_halves_keep_a_filter_that_helps_and_turn_down_one_that_hurts(
+    tmp_path, monkeypatch
+) -> None:
+    scene = load_scene(mirror_scene(tmp_path))
+    c = scene.camera
+    o = RenderOptions(component="caustic", spp=256, photons=256 * 4 * c.width * c.height,
+                      seed=99, network=False, progress=False)  # fmt: skip
+    truth = render(scene, o).image.reshape(-1, 3).astype(np.float64)  # a long render
+    oracle = weight_of(scene, 8, lambda s: truth, monkeypatch)
+    assert 0.6 < oracle < 1.4, oracle  # the reference itself: about all of its move
+    assert weight_of(scene, 8, lambda s: 3 * s.spread, monkeypatch) == 0.0  # thrice too bright
+    assert weight_of(scene, 8, lambda s: s.spread, monkeypatch) == 1.0  # no move: as it is
