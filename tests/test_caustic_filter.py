@@ -262,7 +262,7 @@ def test_the_halves_hold_what_each_pass_gathered_alone() -> None:
     want = np.zeros((2, 2, n, 3))
     found = np.zeros((2, 2, n))
     for j in range(7):
-        before = PassHalves.snapshot(states)
+        halves.mark(states)
         for k, s in enumerate(states):
             point = rng.integers(0, n, 40 + 10 * k)
             flux = rng.uniform(0.0, 2.0, (len(point), 3))
@@ -272,7 +272,7 @@ def test_the_halves_hold_what_each_pass_gathered_alone() -> None:
             found[j % 2, k] += np.bincount(point, minlength=n)
             s.update(point, flux)
             s.paths += 100
-        halves.add(j % 2, before, states, 100)
+        halves.add(j % 2, states, 100)
     assert np.allclose(halves.flux, want, rtol=1e-9, atol=1e-12)
     assert np.allclose(halves.found, found)
     assert list(halves.paths) == [400, 300] and list(halves.passes) == [4, 3]

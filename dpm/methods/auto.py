@@ -242,7 +242,11 @@ def warm_first_kernels(scene: Scene, bvh: BVH, camera: Camera) -> None:
     pixels = np.arange(4, dtype=np.int64)
     trace_emitted(scene, bvh, tiny, pixels, 1, 0, 0)
     states = (PPMState.start(4, 1.0, ALPHA), PPMState.start(4, 1.0, ALPHA))
+    halves = PassHalves.start(2, 4)
+    halves.mark(states)
     sppm_gather(states, points, photons, Stopwatch())
+    halves.add(0, states, 256)
+    box_mean(np.zeros((2, 2)), 3)  # (the finish's: a budget's reserve holds no compiling)
 
 
 def warm_later_kernels(
@@ -572,10 +576,11 @@ class Passes:
             states = (state, self.narrow)
             # the halves only serve to judge the filter (the first pass: before the plan)
             judge = j == 0 or self.filter is not None
-            before = PassHalves.snapshot(states) if judge else None
+            if judge:
+                self.halves.mark(states)
             sppm_gather(states, points, photons, watch)
             if judge:
-                self.halves.add(j % 2, before, states, photons.n_paths)
+                self.halves.add(j % 2, states, photons.n_paths)
 
     def see_light(self, first: np.ndarray) -> None:
         """Add this pass's light seen: its first sample per pixel (P, 3), then
