@@ -25,7 +25,7 @@ from dpm.caustic.stats import CLAMP_Z, DILATIONS, CausticStats, candidates, feat
 from dpm.density.base import luminance
 from dpm.errors import InputError
 from dpm.estimators.ppm import PPMState
-from dpm.methods.auto import Auto, Passes
+from dpm.methods.auto import Auto, Passes, half_state
 from dpm.metrics import rmse
 from dpm.nn.caustic_net import CausticNet, example_features, filter_caustics
 from dpm.nn.weights import Weights, save_weights
@@ -277,7 +277,7 @@ def test_the_halves_hold_what_each_pass_gathered_alone() -> None:
     assert np.allclose(halves.found, found)
     assert list(halves.paths) == [400, 300] and list(halves.passes) == [4, 3]
     # the half's state reads its flux over its paths, at the full run's radii
-    half = halves.state(1, 0, states[0])
+    half = half_state(halves, 1, 0, states[0])
     assert np.allclose(half.irradiance(), want[1, 0] / 300)
     assert np.array_equal(half.radius, states[0].radius)
 

@@ -13,12 +13,12 @@ either side of the comparison.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numba as nb
 import numpy as np
-
-from dpm.estimators.ppm import PPMState
 
 
 @nb.njit(cache=True)
@@ -61,12 +61,13 @@ class PassHalves:
                    np.zeros(2, np.int64), np.zeros((k, p)), np.zeros((k, p, 3)),
                    np.zeros((k, p)))  # fmt: skip
 
-    def mark(self, states: tuple[PPMState, ...]) -> None:
-        """Keep the states' statistics before a gather (`add` takes them back)."""
+    def mark(self, states: Sequence[Any]) -> None:
+        """Keep the statistics of PPM states (`dpm.estimators.ppm.PPMState`: radius, τ,
+        count) before a gather (`add` takes them back)."""
         for k, s in enumerate(states):
             self.radius[k], self.tau[k], self.count[k] = s.radius, s.tau, s.count
 
-    def add(self, half: int, states: tuple[PPMState, ...], paths: int) -> None:
+    def add(self, half: int, states: Sequence[Any], paths: int) -> None:
         """Add to `half` what one pass of `paths` emitted paths gathered into `states` since
         `mark`. PPM's update scales τ by ratio = (R_after / R_before)² after adding the
         pass's flux φ, and grows the count by α·found: both are undone here."""
@@ -75,11 +76,3 @@ class PassHalves:
                       self.count[k], s.radius, s.tau, s.count, s.alpha)  # fmt: skip
         self.paths[half] += paths
         self.passes[half] += 1
-
-    def state(self, half: int, k: int, like: PPMState) -> PPMState:
-        """A PPM state whose estimate is half `half`'s of kernel `k`, at the radii of `like`
-        (the full run's state of that kernel) and its count (α·found, as PPM counts)."""
-        paths = max(int(self.paths[half]), 1)
-        tau = self.flux[half, k] * (np.pi * like.radius**2)[:, None]
-        return PPMState(like.radius, like.alpha * self.found[half, k], tau, paths=paths,
-                        passes=int(self.passes[half]), alpha=like.alpha)  # fmt: skip

@@ -288,6 +288,15 @@ def sharper_where_biased(
     return np.where(sharp[:, None], b, a), sharp
 
 
+def half_state(halves: PassHalves, half: int, k: int, like: PPMState) -> PPMState:
+    """A PPM state whose estimate is half `half`'s of kernel `k` (`PassHalves`), at the radii
+    of `like` (the whole run's state of that kernel) and its count (α·found, as PPM counts)."""
+    paths = max(int(halves.paths[half]), 1)
+    tau = halves.flux[half, k] * (np.pi * like.radius**2)[:, None]
+    return PPMState(like.radius, like.alpha * halves.found[half, k], tau, paths=paths,
+                    passes=int(halves.passes[half]), alpha=like.alpha)  # fmt: skip
+
+
 def spread_sparse(
     caustic: np.ndarray, count: np.ndarray, overlap: np.ndarray, h: int, w: int
 ) -> np.ndarray:
@@ -806,7 +815,7 @@ class Passes:
         passes alone (`PassHalves`, at the whole run's radii)."""
         s, n, fp, passes = self.state, self.narrow, self.footprint, self.j
         if half is not None:
-            s, n = (self.halves.state(half, k, like) for k, like in enumerate((s, n)))
+            s, n = (half_state(self.halves, half, k, like) for k, like in enumerate((s, n)))
             passes = int(self.halves.passes[half])
         own, sharp = chosen or sharper_where_biased(s, n, LEPSKI_Z)
         count = np.where(sharp, n.count, s.count)
