@@ -1,5 +1,5 @@
-"""Box means and a 3 x 3 dilation in NumPy, equal bit for bit to scipy.ndimage's
-`uniform_filter` (modes "constant" and "nearest") and `binary_dilation`.
+"""Box means (their running sums in Numba) and a 3 x 3 dilation in NumPy, equal bit for bit to
+scipy.ndimage's `uniform_filter` (modes "constant" and "nearest") and `binary_dilation`.
 
 Importing scipy.ndimage costs about 0.2 s of every run (its array-API wrappers), a fifth of a
 short render's fixed cost; these are the only parts of it a render calls.

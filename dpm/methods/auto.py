@@ -866,9 +866,10 @@ class Passes:
         down. With one pass there are no halves: 1 (the network was trained for it)."""
         if self.halves.passes.min() < 1:
             return 1.0
-        a, b = self.caustic_stats(half=0), self.caustic_stats(half=1)
+        a = self.caustic_stats(half=0)
+        b = half_state(self.halves, 1, 1, self.narrow).irradiance()  # (only its narrow estimate)
         x = (caustic_forward.filter_caustics(self.filter, a) - a.spread).ravel()
         moved = float(x @ x)
         # (a filter that moves nothing: as it is)
-        weight = float(x @ (b.narrow - a.spread).ravel()) / moved if moved > 0 else 1.0
+        weight = float(x @ (b - a.spread).ravel()) / moved if moved > 0 else 1.0
         return min(max(weight, 0.0), MAX_NETWORK_WEIGHT) if np.isfinite(weight) else 1.0
