@@ -208,8 +208,11 @@ def render_main(argv: Sequence[str] | None = None) -> int:
                 paths = f" ({stats['spp']} paths per pixel)"
                 paths = paths if stats["spp"] != stats["passes"] else ""
                 plan = f"; {stats['passes']} passes{paths}, {stats['plan']['reason']}"
-            if plan and stats["plan"]["network"]:  # how much of the filter's move was kept
-                plan += f" weighted {stats['network_weight']:.2f} (the passes' halves' best blend)"
+            if plan and stats["plan"]["caustics"] == "sppm":  # the caustic's moves kept
+                moved = f"{stats['narrow_weight']:.2f} towards the narrow kernel"
+                if stats["plan"]["network"]:
+                    moved += f", {stats['network_weight']:.2f} towards the network's"
+                plan += f"; caustic moved {moved} (the passes' halves' best blend)"
             if plan and options.denoise is not False and options.component == "full":
                 share = stats.get("denoiser_share", 1.0)
                 if not stats["denoised"]:  # auto kept its plain mean: say why

@@ -291,7 +291,7 @@ def weight_of(scene, passes: int, filtered, monkeypatch) -> float:
     for _ in range(passes):
         run.run_pass()
     monkeypatch.setattr(caustic_forward, "filter_caustics", lambda _, s: filtered(s))
-    return run.network_weight()
+    return run.blend()[1]
 
 
 def test_the_halves_keep_a_filter_that_helps_and_turn_down_one_that_hurts(

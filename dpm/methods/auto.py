@@ -55,6 +55,7 @@ from tqdm import tqdm
 from dpm import collector
 from dpm.camera import Camera
 from dpm.caustic import forward as caustic_forward
+from dpm.caustic.blend import blend_weights
 from dpm.caustic.halves import PassHalves
 from dpm.caustic.stats import CausticStats
 from dpm.denoise import denoise, guides, restore_certain
@@ -137,14 +138,6 @@ CLEAN_GUIDE_PATHS = 8
 # The learned caustic filter's seconds per pixel on 2 cores (measured), and the most of a
 # --time budget it may take: past it the plan leaves it out.
 NETWORK_SECONDS_PER_PIXEL, NETWORK_SHARE = 4e-6, 0.15
-# The most weight `Passes.network_weight` may give the filter's move. The halves' least-squares
-# blend often asks for more than the whole move (the filter, held within CLAMP_Z standard
-# errors, undershoots), and on the examples taking up to twice it scored better (caustic RMSE
-# over the render without the network at 4, 16, 64 passes, seed 1, geometric mean: 0.868 at
-# 1, 0.856 at 1.5, 0.855 at 2), but past 1 the blend is no longer between two non-negative
-# images: where the filter darkens it crosses zero, and the glass egg's floor broke into
-# dark-holed islands (tests/test_auto.py, stray photons). So the whole move at most.
-MAX_NETWORK_WEIGHT = 1.0
 
 
 @dataclass
@@ -377,8 +370,8 @@ class Auto(Method):
         pixels whose caustic is the narrow kernel's, the first pass's seconds (and those
         before it), whether the first pass alone overran the budget, and whether the image
         is the denoised one and its weight in the blend with the plain mean
-        (`Passes.denoiser_share`), and the learned caustic filter's weight in its blend with
-        the caustic without it (`Passes.network_weight`; 0 where the filter did not run)."""
+        (`Passes.denoiser_share`), and the weights of the caustic's moves towards the narrow
+        kernel's estimate and the learned filter's (`Passes.blend`; 0 where not made)."""
         return {
             "passes": self.passes, "plan": self.plan.as_dict(), "spp": self.spp,
             "caustic_photons": self.caustic_photons, "nonfinite_samples": self.dropped,
@@ -386,7 +379,8 @@ class Auto(Method):
             "light_samples": max(self.light_samples, 0), "sharp_pixels": self.sharp_pixels,
             "pass_seconds": self.pass_seconds, "setup_seconds": self.setup_seconds,
             "overran": self.overran, "denoised": self.denoised,
-            "denoiser_share": self.denoiser_share, "network_weight": self.network_weight,
+            "denoiser_share": self.denoiser_share, "narrow_weight": self.narrow_weight,
+            "network_weight": self.network_weight,
         }  # fmt: skip
 
 
@@ -404,7 +398,7 @@ class Passes:
         self.full = o.component == "full"
         self.state = PPMState.start(self.pixels, o.radius or 1.0, ALPHA)  # radii: first pass
         self.narrow = PPMState.start(self.pixels, 1.0, ALPHA)  # the same at NARROW × its radii
-        # what each pass gathered alone, in two halves of the passes (`network_weight`)
+        # what each pass gathered alone, in two halves of the passes (`blend`)
         self.halves = PassHalves.start(2, self.pixels)
         self.paths = Halves(self.h, self.w)
         self.extra_paths = 0
@@ -583,13 +577,9 @@ class Passes:
         self.add_guides(a, n)
         if photons is not None:
             states = (state, self.narrow)
-            # the halves only serve to judge the filter (the first pass: before the plan)
-            judge = j == 0 or self.filter is not None
-            if judge:
-                self.halves.mark(states)
+            self.halves.mark(states)
             sppm_gather(states, points, photons, watch)
-            if judge:
-                self.halves.add(j % 2, states, photons.n_paths)
+            self.halves.add(j % 2, states, photons.n_paths)
 
     def see_light(self, first: np.ndarray) -> None:
         """Add this pass's light seen: its first sample per pixel (P, 3), then
@@ -703,7 +693,7 @@ class Passes:
         m.passes, m.spp, m.plan, m.caustic_photons = j, self.spp, self.plan, self.state.photons
         m.dropped, m.extra_paths = self.dropped, self.extra_paths
         m.denoised, m.denoiser_share = False, 0.0  # set below where the denoiser runs
-        m.network_weight = 0.0  # set by `caustics` where the filter runs
+        m.narrow_weight = m.network_weight = 0.0  # set by `caustics` where made
         m.light_pixels = 0 if self.glassy is None else len(self.glassy)
         seen = int(sum(self.glow.half(k).count.sum() for k in (0, 1)))
         m.light_samples = seen - self.spp * self.pixels
@@ -829,47 +819,58 @@ class Passes:
 
     def caustics(self) -> tuple[np.ndarray, np.ndarray]:
         """(P, 3) float64 caustic radiance per pixel, SPPM's at the sharper of two radii where
-        it shows (`sharper_where_biased`) with sparse pixels spread (`spread_sparse`), and
-        (P,) the photons in the pixel's disc that tell its error (zero where no caustic
-        was estimated)."""
+        it shows (`sharper_where_biased`) with sparse pixels spread (`spread_sparse`), moved
+        towards the narrow kernel's estimate and the learned filter's as far as the passes'
+        halves say it pays (`blend`), and (P,) the photons in the pixel's disc that tell its
+        error (zero where no caustic was estimated)."""
         caustic, sharp = sharper_where_biased(self.state, self.narrow, LEPSKI_Z)  # throughput·ρ/π
         self.method.sharp_pixels = int(sharp.sum())
         if self.footprint is None:  # no caustics were estimated
             return caustic, np.zeros(self.pixels)
         stats = self.caustic_stats((caustic, sharp))
+        moves = [self.narrow.irradiance() - stats.spread]
         if self.filter is not None:
             with self.watch("network"):
-                filtered = caustic_forward.filter_caustics(self.filter, stats)
-                weight = self.method.network_weight = self.network_weight()
-                return stats.spread + weight * (filtered - stats.spread), stats.own_count
-        return stats.spread, stats.own_count
+                moves.append(caustic_forward.filter_caustics(self.filter, stats) - stats.spread)
+                weights = self.blend()
+        else:
+            weights = self.blend()
+        self.method.narrow_weight = float(weights[0])
+        if self.filter is not None:
+            self.method.network_weight = float(weights[1])
+        return stats.spread + sum(
+            w * x for w, x in zip(weights, moves, strict=True)
+        ), stats.own_count
 
-    def network_weight(self) -> float:
-        """The weight in [0, MAX_NETWORK_WEIGHT] of the learned filter's move from the caustic
-        without it: the blend spread + weight·(filtered − spread) expected closest to the
-        truth.
+    def blend(self) -> np.ndarray:
+        """The weights (narrow kernel's[, learned filter's]) of the moves from the caustic
+        estimate towards those two (`dpm.caustic.blend`), fitted on two independent halves
+        of the passes (`PassHalves`): the even passes' half a, its own moves (its narrow
+        estimate, and the filter run on it alone), against the odd half's narrow-kernel
+        estimate. With one pass there are no halves: the narrow kernel 0 (Lepski's rule
+        alone), the filter 1 (the network was trained for it).
 
-        Judged as `denoiser_share` judges the denoiser, on two independent halves of the
-        passes (`PassHalves`): the even passes' half a is filtered alone (F) and the blend
-        a + weight·(F − a) fitted by least squares to the odd passes' narrow-kernel estimate
-        b: weight = Σ (F − a)·(b − a) / Σ (F − a)². (Fitted both ways and summed, as the
-        denoiser's is, it scored the same on the examples, 0.855 against 0.856 at 2-64
-        passes, seeds 1-2, and cost another run of the network.) b's noise is
-        independent of a's, so it adds the same to every blend's error; its bias is not, and
-        the narrow kernel's is the least the render has. Against the other half's own
-        estimate, which shares a's blur, the weight came out 0.2-0.6 on the unseen spheres,
-        where against their reference it is 1.5 (much of what the filter removes is blur, by
-        taking the narrow estimates); against the narrow one it follows the reference's on
-        the examples (e.g. the ring 1.33 / 1.45 / 1.53 against 1.38 / 1.59 / 1.58 at 4 / 16
-        / 64 passes, pool1 1.23 / 1.00 / 0.95 against 1.11 / 0.96 / 0.83). A filter that does
-        not suit the scene (whose blur costs more than the noise it removes) is so turned
-        down. With one pass there are no halves: 1 (the network was trained for it)."""
+        Why the narrow estimate as the target: against the other half's own estimate, which
+        shares a's blur, the filter's weight came out 0.2-0.6 on the unseen spheres where
+        against their reference it is 1.5 (much of what the filter removes is blur); against
+        the narrow one it follows the reference's on the examples (the ring 1.33 / 1.45 /
+        1.53 against 1.38 / 1.59 / 1.58 at 4 / 16 / 64 passes). Fitted both ways and summed,
+        as the denoiser's share is, it scored the same (0.855 against 0.856) for another run
+        of the network. The narrow move, added 2026-11-29 after the same fit gave it on the
+        examples (caustic RMSE 0.962 / 0.927 / 0.929 of Lepski's rule alone at 4 / 16 / 64
+        passes, seeds 1-2, none above 1.002; with the filter 0.982 / 0.972 / 0.975 of the
+        filter alone), is a per-render correction of Lepski's rule: where its test is too
+        timid for the scene, the halves show the narrow kernel closer."""
+        network = self.filter is not None
         if self.halves.passes.min() < 1:
-            return 1.0
+            return np.array([0.0, 1.0]) if network else np.zeros(1)
         a = self.caustic_stats(half=0)
-        b = half_state(self.halves, 1, 1, self.narrow).irradiance()  # (only its narrow estimate)
-        x = (caustic_forward.filter_caustics(self.filter, a) - a.spread).ravel()
-        moved = float(x @ x)
-        # (a filter that moves nothing: as it is)
-        weight = float(x @ (b - a.spread).ravel()) / moved if moved > 0 else 1.0
-        return min(max(weight, 0.0), MAX_NETWORK_WEIGHT) if np.isfinite(weight) else 1.0
+        narrow = half_state(self.halves, 0, 1, self.narrow).irradiance()
+        target = half_state(self.halves, 1, 1, self.narrow).irradiance()
+        moves = [narrow - a.spread]
+        if network:
+            moves.append(caustic_forward.filter_caustics(self.filter, a) - a.spread)
+        weights = blend_weights(moves, target - a.spread)
+        if network and not moves[1].any():  # a filter that moves nothing: as it is
+            weights[1] = 1.0
+        return weights

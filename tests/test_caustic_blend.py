@@ -1,0 +1,49 @@
+"""The caustic's moves towards other estimates, weighted by least squares on the simplex."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from dpm.caustic.blend import blend_weights
+
+
+def cost(w: np.ndarray, moves: list[np.ndarray], residual: np.ndarray) -> float:
+    """|Σ w_i·moves_i − residual|²."""
+    return float(np.sum((sum(wi * m for wi, m in zip(w, moves, strict=True)) - residual) ** 2))
+
+
+def test_one_move_takes_the_share_that_fits() -> None:
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(100, 3))
+    assert np.allclose(blend_weights([x], 0.4 * x), [0.4])
+    assert np.allclose(blend_weights([x], 2.0 * x), [1.0])  # at most the whole move
+    assert np.allclose(blend_weights([x], -x), [0.0])  # a move away from the target: none
+    assert np.allclose(blend_weights([np.zeros((100, 3))], x), [0.0])  # no move, no evidence
+
+
+def test_two_moves_stay_on_the_simplex_and_beat_every_point_of_it() -> None:
+    rng = np.random.default_rng(1)
+    grid = [np.array(w) for w in itertools.product(np.linspace(0, 1, 41), repeat=2)]
+    grid = [w for w in grid if w.sum() <= 1 + 1e-12]
+    for trial in range(30):
+        moves = [rng.normal(size=(50, 3)) for _ in range(2)]
+        if trial % 3 == 0:  # nearly parallel moves
+            moves[1] = moves[0] + 0.1 * rng.normal(size=(50, 3))
+        residual = rng.uniform(-1, 2) * moves[0] + rng.uniform(-1, 2) * moves[1]
+        residual += 0.5 * rng.normal(size=(50, 3))
+        w = blend_weights(moves, residual)
+        assert (w >= 0).all() and w.sum() <= 1 + 1e-9
+        assert cost(w, moves, residual) <= min(cost(g, moves, residual) for g in grid) + 1e-9
+
+
+def test_the_blend_of_non_negative_images_stays_non_negative() -> None:
+    # a + Σ w_i (b_i - a) is a convex blend of a and the b_i: never below zero where all are
+    rng = np.random.default_rng(2)
+    a = rng.uniform(0, 1, (200, 3))
+    b = [rng.uniform(0, 1, (200, 3)) for _ in range(2)]
+    target = 3 * b[0] + 3 * b[1] - 5 * a  # asks for weights past the simplex
+    w = blend_weights([bi - a for bi in b], target - a)
+    assert (a + sum(wi * (bi - a) for wi, bi in zip(w, b, strict=True)) >= 0).all()
+    assert np.isclose(w.sum(), 1.0)
