@@ -858,7 +858,7 @@ class Passes:
         as the denoiser's share is, it scored the same (0.855 against 0.856) for another run
         of the network. The narrow move, added 2026-11-29 after the same fit gave it on the
         examples (caustic RMSE 0.962 / 0.927 / 0.929 of Lepski's rule alone at 4 / 16 / 64
-        passes, seeds 1-2, none above 1.002; with the filter 0.982 / 0.972 / 0.975 of the
+        passes, seeds 1-2, none above 1.006; with the filter 0.986 / 0.972 / 0.975 of the
         filter alone), is a per-render correction of Lepski's rule: where its test is too
         timid for the scene, the halves show the narrow kernel closer."""
         network = self.filter is not None
