@@ -47,3 +47,36 @@ def test_the_blend_of_non_negative_images_stays_non_negative() -> None:
     w = blend_weights([bi - a for bi in b], target - a)
     assert (a + sum(wi * (bi - a) for wi, bi in zip(w, b, strict=True)) >= 0).all()
     assert np.isclose(w.sum(), 1.0)
+
+
+def test_degenerate_and_non_finite_moves_give_feasible_weights() -> None:
+    rng = np.random.default_rng(3)
+    x = rng.normal(size=(60, 3))
+    # identical moves: any split of the best total share is a minimum; the total is 0.5
+    w = blend_weights([x, x], 0.5 * x)
+    assert (w >= 0).all() and np.isclose(w.sum(), 0.5)
+    # a zero move beside a useful one: weight 0, the other fitted alone
+    assert np.allclose(blend_weights([np.zeros_like(x), x], 0.3 * x), [0.0, 0.3])
+    # NaN and inf entries are left out of the fit instead of switching it off
+    bad = 0.7 * x
+    bad[0, 0], bad[5, 1] = np.nan, np.inf
+    y = x.copy()
+    y[9, 2] = np.nan
+    assert np.allclose(blend_weights([y], bad), [0.7])
+
+
+def test_the_narrow_move_leaves_sparse_pixels_spread() -> None:
+    # a pixel whose disc holds too few photons keeps spread_sparse's window mean: the narrow
+    # kernel would paint a lone photon's speck back, four times brighter
+    from dpm.caustic.stats import CausticStats
+    from dpm.methods.auto import SPARSE_PHOTONS, narrow_move
+
+    p = 4
+    counts = np.array([0.0, SPARSE_PHOTONS / 2, SPARSE_PHOTONS, 10 * SPARSE_PHOTONS])
+    narrow, spread = np.full((p, 3), 4.0), np.full((p, 3), 1.0)
+    ones = np.ones(p)
+    stats = CausticStats(1, p, 4, spread, narrow, counts, counts / 4, spread, counts, spread,
+                         ones, 0 * ones, np.ones((p, 3)), np.ones((p, 3)))  # fmt: skip
+    move = narrow_move(stats)
+    assert np.array_equal(move[:2], np.zeros((2, 3)))
+    assert np.array_equal(move[2:], np.full((2, 3), 3.0))

@@ -291,7 +291,9 @@ def weight_of(scene, passes: int, filtered, monkeypatch) -> float:
     for _ in range(passes):
         run.run_pass()
     monkeypatch.setattr(caustic_forward, "filter_caustics", lambda _, s: filtered(s))
-    return run.blend()[1]
+    weights = run.blend()
+    assert (weights >= 0).all() and weights.sum() <= 1 + 1e-9  # a convex blend, always
+    return weights[1]
 
 
 def test_the_halves_keep_a_filter_that_helps_and_turn_down_one_that_hurts(
@@ -303,6 +305,6 @@ def test_the_halves_keep_a_filter_that_helps_and_turn_down_one_that_hurts(
                       seed=99, network=False, progress=False)  # fmt: skip
     truth = render(scene, o).image.reshape(-1, 3).astype(np.float64)  # a long render
     oracle = weight_of(scene, 8, lambda s: truth, monkeypatch)
-    assert 0.6 < oracle < 1.4, oracle  # the reference itself: about all of its move
+    assert 0.6 < oracle, oracle  # the reference itself: about all of its move
     assert weight_of(scene, 8, lambda s: 3 * s.spread, monkeypatch) == 0.0  # thrice too bright
     assert weight_of(scene, 8, lambda s: s.spread, monkeypatch) == 1.0  # no move: as it is

@@ -21,12 +21,16 @@ import numpy as np
 
 def blend_weights(moves: list[np.ndarray], residual: np.ndarray) -> np.ndarray:
     """(n,) float64 weights w ≥ 0, Σ w ≤ 1 minimising |Σ w_i·moves_i − residual|², for n ≤ 3
-    moves and residual t − a of one shape (any, e.g. (P, 3)); a move that is zero everywhere
-    (no evidence either way) gets weight 0 and is left out of the fit."""
+    moves and residual t − a of one shape (any, e.g. (P, 3)), over the entries where all are
+    finite; a move that is zero there (no evidence either way) gets weight 0."""
     x = np.stack([m.ravel() for m in moves])
-    gram, g = x @ x.T, x @ residual.ravel()
+    r = residual.ravel()
+    finite = np.isfinite(r) & np.isfinite(x).all(axis=0)
+    if not finite.all():
+        x, r = x[:, finite], r[finite]
+    gram, g = x @ x.T, x @ r
     n = len(moves)
-    usable = [i for i in range(n) if gram[i, i] > 0 and np.isfinite(gram[i, i])]
+    usable = [i for i in range(n) if gram[i, i] > 0]
     best, best_w = 0.0, np.zeros(n)  # w = 0 costs 0 in the objective below
     # The minimum lies in the interior of one face of the simplex: try each face's
     # unconstrained minimum (free weights on a subset, either with the rest 0 or with the

@@ -1,14 +1,15 @@
-"""The caustic estimate in two independent halves, for judging the learned filter at render time.
+"""The caustic estimate in two independent halves, for judging its moves at render time.
 
 Each pass of `auto` gathers its own photons at its own visible points into SPPM's per-pixel
 statistics (one state at the wide radius, one at the narrow). What a pass added alone, φ_j
 photons' flux within radius R_j, is an estimate of its own: φ_j / (π R_j² paths_j). The
 passes are independent, so the sums of those estimates over the even passes and over the
 odd ones are two independent estimates of the same caustic (at about the same radii), as the
-paths' halves are for the denoiser (`Passes.denoiser_share`). The filter applied to one half
-and scored against the other tells, without any reference, whether the filter brings that
-half closer to the truth: the other half's noise is independent, so it adds the same to
-either side of the comparison.
+paths' halves are for the denoiser (`Passes.denoiser_share`). A move of one half (towards
+its narrow kernel's estimate, or the learned filter's) scored against the other tells,
+without any reference, whether it brings that half closer to the truth: the other half's
+noise is independent, so it adds the same to either side of the comparison
+(`dpm.caustic.blend`).
 """
 
 from __future__ import annotations

@@ -281,6 +281,14 @@ def sharper_where_biased(
     return np.where(sharp[:, None], b, a), sharp
 
 
+def narrow_move(stats: CausticStats) -> np.ndarray:
+    """(P, 3) float64 move from the caustic estimate (`stats.spread`) to the narrow kernel's,
+    zero where the pixel is sparse: there `spread_sparse` has replaced a lone photon's speck
+    by its window's mean, and the narrow kernel would paint the speck back, brighter."""
+    sparse = stats.own_count < SPARSE_PHOTONS
+    return np.where(sparse[:, None], 0.0, stats.narrow - stats.spread)
+
+
 def half_state(halves: PassHalves, half: int, k: int, like: PPMState) -> PPMState:
     """A PPM state whose estimate is half `half`'s of kernel `k` (`PassHalves`), at the radii
     of `like` (the whole run's state of that kernel) and its count (α·found, as PPM counts)."""
@@ -828,7 +836,7 @@ class Passes:
         if self.footprint is None:  # no caustics were estimated
             return caustic, np.zeros(self.pixels)
         stats = self.caustic_stats((caustic, sharp))
-        moves = [self.narrow.irradiance() - stats.spread]
+        moves = [narrow_move(stats)]
         if self.filter is not None:
             with self.watch("network"):
                 moves.append(caustic_forward.filter_caustics(self.filter, stats) - stats.spread)
@@ -838,9 +846,21 @@ class Passes:
         self.method.narrow_weight = float(weights[0])
         if self.filter is not None:
             self.method.network_weight = float(weights[1])
-        return stats.spread + sum(
-            w * x for w, x in zip(weights, moves, strict=True)
-        ), stats.own_count
+        out = stats.spread.copy()
+        for w, x in zip(weights, moves, strict=True):
+            if w > 0:  # (a move not taken leaves no NaN of its own behind: 0·NaN)
+                out += w * x
+        # The narrow move's photons tell the caustic's error too: fewer of them, more noise.
+        # The narrow disc's photons are among the wide one's, so the two estimates' errors
+        # correlate (covariance about the wide one's variance): the blend's relative
+        # variance is (1 - w²)/N_own + w²/N_narrow. Where Lepski's rule took the narrow
+        # kernel, or the pixel is sparse, the move is zero.
+        w = weights[0]
+        moved = (stats.own_count >= SPARSE_PHOTONS) & ~sharp & (w > 0)
+        narrow_count = np.maximum(stats.narrow_count, 1.0)
+        own = np.maximum(stats.own_count, 1.0)
+        effective = 1.0 / ((1 - w * w) / own + w * w / narrow_count)
+        return out, np.where(moved, effective, stats.own_count)
 
     def blend(self) -> np.ndarray:
         """The weights (narrow kernel's[, learned filter's]) of the moves from the caustic
@@ -865,12 +885,11 @@ class Passes:
         if self.halves.passes.min() < 1:
             return np.array([0.0, 1.0]) if network else np.zeros(1)
         a = self.caustic_stats(half=0)
-        narrow = half_state(self.halves, 0, 1, self.narrow).irradiance()
         target = half_state(self.halves, 1, 1, self.narrow).irradiance()
-        moves = [narrow - a.spread]
+        moves = [narrow_move(a)]
         if network:
             moves.append(caustic_forward.filter_caustics(self.filter, a) - a.spread)
         weights = blend_weights(moves, target - a.spread)
         if network and not moves[1].any():  # a filter that moves nothing: as it is
-            weights[1] = 1.0
+            weights[1] = 1.0 - weights[0]  # (on the simplex still)
         return weights
