@@ -877,8 +877,8 @@ class Passes:
         1.53 against 1.38 / 1.59 / 1.58 at 4 / 16 / 64 passes). Fitted both ways and summed,
         as the denoiser's share is, it scored the same (0.855 against 0.856) for another run
         of the network. The narrow move, added 2026-11-29 after the same fit gave it on the
-        examples (caustic RMSE 0.962 / 0.927 / 0.929 of Lepski's rule alone at 4 / 16 / 64
-        passes, seeds 1-2, none above 1.006; with the filter 0.986 / 0.972 / 0.975 of the
+        examples (caustic RMSE 0.962 / 0.926 / 0.929 of Lepski's rule alone at 4 / 16 / 64
+        passes, seeds 1-2, none above 1.017; with the filter 0.988 / 0.972 / 0.975 of the
         filter alone), is a per-render correction of Lepski's rule: where its test is too
         timid for the scene, the halves show the narrow kernel closer."""
         network = self.filter is not None
