@@ -46,6 +46,7 @@ specks for noise), elsewhere it goes through the denoiser with the paths.
 from __future__ import annotations
 
 import time
+from contextlib import nullcontext
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -837,11 +838,10 @@ class Passes:
             return caustic, np.zeros(self.pixels)
         stats = self.caustic_stats((caustic, sharp))
         moves = [narrow_move(stats)]
-        if self.filter is not None:
-            with self.watch("network"):
+        # (the network's seconds: the filter on the whole run and on the half in `blend`)
+        with self.watch("network") if self.filter is not None else nullcontext():
+            if self.filter is not None:
                 moves.append(caustic_forward.filter_caustics(self.filter, stats) - stats.spread)
-                weights = self.blend()
-        else:
             weights = self.blend()
         self.method.narrow_weight = float(weights[0])
         if self.filter is not None:
@@ -853,10 +853,10 @@ class Passes:
         # The narrow move's photons tell the caustic's error too: fewer of them, more noise.
         # The narrow disc's photons are among the wide one's, so the two estimates' errors
         # correlate (covariance about the wide one's variance): the blend's relative
-        # variance is (1 - w²)/N_own + w²/N_narrow. Where Lepski's rule took the narrow
-        # kernel, or the pixel is sparse, the move is zero.
+        # variance is (1 - w²)/N_own + w²/N_narrow, where the narrow move moved the pixel
+        # (not where Lepski's rule took the narrow kernel already, nor where it is sparse).
         w = weights[0]
-        moved = (stats.own_count >= SPARSE_PHOTONS) & ~sharp & (w > 0)
+        moved = moves[0].any(axis=1) & (w > 0)
         narrow_count = np.maximum(stats.narrow_count, 1.0)
         own = np.maximum(stats.own_count, 1.0)
         effective = 1.0 / ((1 - w * w) / own + w * w / narrow_count)
