@@ -65,18 +65,29 @@ def test_degenerate_and_non_finite_moves_give_feasible_weights() -> None:
     assert np.allclose(blend_weights([y], bad), [0.7])
 
 
-def test_the_narrow_move_leaves_sparse_pixels_spread() -> None:
-    # a pixel whose disc holds too few photons keeps spread_sparse's window mean: the narrow
-    # kernel would paint a lone photon's speck back, four times brighter
+def test_moves_leave_sparse_pixels_spread_or_within_its_error() -> None:
+    # a pixel whose disc holds too few photons keeps spread_sparse's window mean (z = 0: the
+    # narrow kernel would paint a lone photon's speck back, four times brighter), or moves
+    # at most z standard errors of it, from its window's photons (the learned filter)
     from dpm.caustic.stats import CausticStats
-    from dpm.methods.auto import SPARSE_PHOTONS, narrow_move
+    from dpm.methods.auto import SPARSE_PHOTONS, held_move
 
     p = 4
     counts = np.array([0.0, SPARSE_PHOTONS / 2, SPARSE_PHOTONS, 10 * SPARSE_PHOTONS])
+    window = np.array([0.0, 16.0, SPARSE_PHOTONS, 10 * SPARSE_PHOTONS])  # photons behind spread
     narrow, spread = np.full((p, 3), 4.0), np.full((p, 3), 1.0)
     ones = np.ones(p)
     stats = CausticStats(1, p, 4, spread, narrow, counts, counts / 4, spread, counts, spread,
-                         ones, 0 * ones, np.ones((p, 3)), np.ones((p, 3)))  # fmt: skip
-    move = narrow_move(stats)
+                         window, ones, 0 * ones, np.ones((p, 3)), np.ones((p, 3)))  # fmt: skip
+    move = held_move(stats, narrow, 0.0)
     assert np.array_equal(move[:2], np.zeros((2, 3)))
     assert np.array_equal(move[2:], np.full((2, 3), 3.0))
+    far = narrow.copy()
+    far[1, 0] = 1.0
+    move = held_move(stats, far, 2.0)
+    # no photon in the window: the error is the spread value itself (1), so 2 at most
+    assert np.allclose(move[0], [2.0, 2.0, 2.0])
+    assert np.allclose(move[1], [0.0, 0.5, 0.5])  # 16 photons: 2 / √16 = 0.5 allowed
+    far[1] = [4.0, 1.5, 1.25]  # one share for all three channels: the colour is kept
+    assert np.allclose(held_move(stats, far, 2.0)[1], [0.5, 0.5 / 6, 0.25 / 6])
+    assert np.array_equal(held_move(stats, far, 2.0)[2:], far[2:] - 1.0)  # dense: as it is

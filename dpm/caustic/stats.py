@@ -50,6 +50,7 @@ class CausticStats:
     own: np.ndarray  # (P, 3) float64 the estimate without the network (Lepski's choice)
     own_count: np.ndarray  # (P,) float64 photons behind `own`
     spread: np.ndarray  # (P, 3) float64 `own` with its sparse pixels spread (no network)
+    spread_count: np.ndarray  # (P,) float64 photons behind `spread` (a sparse pixel's window's)
     radius: np.ndarray  # (P,) float64 wide radius in pixel footprints
     depth: np.ndarray  # (P,) float64 log(footprint / the median pixel's footprint)
     albedo: np.ndarray  # (P, 3) float64 mean albedo guide in [0, 1]

@@ -58,7 +58,7 @@ from dpm.camera import Camera
 from dpm.caustic import forward as caustic_forward
 from dpm.caustic.blend import blend_weights
 from dpm.caustic.halves import PassHalves
-from dpm.caustic.stats import CausticStats
+from dpm.caustic.stats import CLAMP_Z, CausticStats
 from dpm.denoise import denoise, guides, restore_certain
 from dpm.density.base import luminance
 from dpm.density.progressive import pass_seed
@@ -282,12 +282,25 @@ def sharper_where_biased(
     return np.where(sharp[:, None], b, a), sharp
 
 
-def narrow_move(stats: CausticStats) -> np.ndarray:
-    """(P, 3) float64 move from the caustic estimate (`stats.spread`) to the narrow kernel's,
-    zero where the pixel is sparse: there `spread_sparse` has replaced a lone photon's speck
-    by its window's mean, and the narrow kernel would paint the speck back, brighter."""
+def held_move(stats: CausticStats, estimate: np.ndarray, z: float) -> np.ndarray:
+    """(P, 3) float64 move from the caustic estimate (`stats.spread`) to `estimate` (P, 3),
+    held, where the pixel is sparse, within z standard errors of the spread estimate (1/√ its
+    window's photons; z = 0: no move there). There `spread_sparse` has replaced a lone
+    photon's speck by its window's mean, and an estimate that reads the pixel's own photons
+    (the narrow kernel, the learned filter) would paint the speck back: the filter did, some
+    50 specks on the floor of the glass egg's default render (2026-11-29). As passes add
+    photons no pixel stays sparse: the move is the estimate's."""
+    move = estimate - stats.spread
     sparse = stats.own_count < SPARSE_PHOTONS
-    return np.where(sparse[:, None], 0.0, stats.narrow - stats.spread)
+    if not sparse.any():
+        return move
+    allowed = (
+        z * stats.spread[sparse] / np.sqrt(np.maximum(stats.spread_count[sparse], 1.0))[:, None]
+    )
+    reach = np.maximum(np.abs(move[sparse]), allowed)
+    keep = np.divide(allowed, reach, out=np.ones_like(reach), where=reach > 0).min(axis=1)
+    move[sparse] *= keep[:, None]
+    return move
 
 
 def half_state(halves: PassHalves, half: int, k: int, like: PPMState) -> PPMState:
@@ -301,8 +314,9 @@ def half_state(halves: PassHalves, half: int, k: int, like: PPMState) -> PPMStat
 
 def spread_sparse(
     caustic: np.ndarray, count: np.ndarray, overlap: np.ndarray, h: int, w: int
-) -> np.ndarray:
-    """(P, 3) float64 caustic radiance per pixel with the sparse pixels' estimates spread:
+) -> tuple[np.ndarray, np.ndarray]:
+    """(P, 3) float64 caustic radiance per pixel with the sparse pixels' estimates spread,
+    and (P,) the photons behind each (`count`, or at a sparse pixel its window's):
     a pixel whose disc holds fewer than SPARSE_PHOTONS photons (a relative standard error
     above SEEN_ERROR: stray light refracted far from the caustic, which one photon paints as
     a speck the shape of the kernel) takes the mean of the sparse pixels of the smallest
@@ -314,11 +328,12 @@ def spread_sparse(
     consistent."""
     sparse = count < SPARSE_PHOTONS
     if not sparse.any():
-        return caustic
+        return caustic, count
     member = sparse.reshape(h, w).astype(np.float64)
     values = np.where(sparse[:, None], caustic, 0.0).reshape(h, w, 3)
     photons = np.where(sparse, count / np.maximum(overlap, 1.0), 0.0).reshape(h, w)
     out, todo = caustic.copy(), sparse.reshape(h, w).copy()
+    behind = count.astype(np.float64).reshape(h, w)
     for i, size in enumerate(SPREAD_WINDOWS):
         # window means of the sparse pixels: sums over the window / its sparse pixels
         n = box_mean(member, size, mode="constant")
@@ -329,8 +344,9 @@ def spread_sparse(
                 box_mean(values, (size, size, 1), mode="constant") / np.maximum(n, 1e-30)[..., None]
             )
             out.reshape(h, w, 3)[take] = mean[take]
+            behind[take] = found[take]
             todo &= ~take
-    return out
+    return out, behind.ravel()
 
 
 class Auto(Method):
@@ -822,7 +838,7 @@ class Passes:
         overlap = np.pi * (np.where(sharp, n.radius, s.radius) / fp) ** 2
         return CausticStats(
             self.h, self.w, passes, s.irradiance(), n.irradiance(), s.count, n.count, own,
-            count, spread_sparse(own, count, overlap, self.h, self.w), s.radius / fp,
+            count, *spread_sparse(own, count, overlap, self.h, self.w), s.radius / fp,
             np.log(fp / np.median(fp)), *(g.reshape(-1, 3) for g in self.guides()),
         )  # fmt: skip
 
@@ -837,11 +853,12 @@ class Passes:
         if self.footprint is None:  # no caustics were estimated
             return caustic, np.zeros(self.pixels)
         stats = self.caustic_stats((caustic, sharp))
-        moves = [narrow_move(stats)]
+        moves = [held_move(stats, stats.narrow, 0.0)]
         # (the network's seconds: the filter on the whole run and on the half in `blend`)
         with self.watch("network") if self.filter is not None else nullcontext():
             if self.filter is not None:
-                moves.append(caustic_forward.filter_caustics(self.filter, stats) - stats.spread)
+                filtered = caustic_forward.filter_caustics(self.filter, stats)
+                moves.append(held_move(stats, filtered, CLAMP_Z))
             weights = self.blend()
         self.method.narrow_weight = float(weights[0])
         if self.filter is not None:
@@ -886,9 +903,9 @@ class Passes:
             return np.array([0.0, 1.0]) if network else np.zeros(1)
         a = self.caustic_stats(half=0)
         target = half_state(self.halves, 1, 1, self.narrow).irradiance()
-        moves = [narrow_move(a)]
+        moves = [held_move(a, a.narrow, 0.0)]
         if network:
-            moves.append(caustic_forward.filter_caustics(self.filter, a) - a.spread)
+            moves.append(held_move(a, caustic_forward.filter_caustics(self.filter, a), CLAMP_Z))
         weights = blend_weights(moves, target - a.spread)
         if network and not moves[1].any():  # a filter that moves nothing: as it is
             weights[1] = 1.0 - weights[0]  # (on the simplex still)
