@@ -51,6 +51,8 @@ def run(passes: list[int], seeds: list[int], zs: list[float]) -> list[dict]:
                 ):
                     errors[p]["plain"].append(rmse(s.spread.reshape(h, w, 3), ref))
                     for z in zs:
+                        # (the clamp alone: the render also holds sparse pixels to the spread
+                        # estimate, `auto.held_move`, at auto's own CLAMP_Z, not patched here)
                         stats.CLAMP_Z = z
                         out = forward.filter_caustics(weights, s).reshape(h, w, 3)
                         errors[p][z].append(rmse(out, ref))

@@ -91,3 +91,17 @@ def test_moves_leave_sparse_pixels_spread_or_within_its_error() -> None:
     far[1] = [4.0, 1.5, 1.25]  # one share for all three channels: the colour is kept
     assert np.allclose(held_move(stats, far, 2.0)[1], [0.5, 0.5 / 6, 0.25 / 6])
     assert np.array_equal(held_move(stats, far, 2.0)[2:], far[2:] - 1.0)  # dense: as it is
+    # a channel the light lacks (spread 0, or -1e-17 from the box sums) does not hold the
+    # others still, and the move never turns round
+    stats.spread[1] = [1.0, -1e-17, 0.0]
+    before = stats.spread.copy()
+    move = held_move(stats, stats.spread + [[0.0, 1e-6, 0.0]], 2.0)
+    assert np.allclose(move[1], [0.0, 1e-6, 0.0])
+    move = held_move(stats, np.zeros((p, 3)), 2.0)
+    assert move[1, 0] == -0.5 and (move[1] <= 1e-17).all()  # towards 0, never past it
+    np.testing.assert_array_equal(stats.spread, before)  # its input is left as it was
+    # an estimate that is not finite moves no sparse pixel (z = 0 included)
+    wild = np.full((p, 3), np.inf)
+    wild[0, 0] = np.nan
+    for z in (0.0, 2.0):
+        assert np.array_equal(held_move(stats, wild, z)[:2], np.zeros((2, 3)))

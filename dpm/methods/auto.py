@@ -284,22 +284,27 @@ def sharper_where_biased(
 
 def held_move(stats: CausticStats, estimate: np.ndarray, z: float) -> np.ndarray:
     """(P, 3) float64 move from the caustic estimate (`stats.spread`) to `estimate` (P, 3),
-    held, where the pixel is sparse, within z standard errors of the spread estimate (1/√ its
-    window's photons; z = 0: no move there). There `spread_sparse` has replaced a lone
-    photon's speck by its window's mean, and an estimate that reads the pixel's own photons
-    (the narrow kernel, the learned filter) would paint the speck back: the filter did, some
-    50 specks on the floor of the glass egg's default render (2026-11-29). As passes add
-    photons no pixel stays sparse: the move is the estimate's."""
+    held, where the pixel is sparse, within z standard errors of the spread estimate (its
+    brightest channel over √ its window's photons, for every channel; z = 0: no move there).
+    There `spread_sparse` has replaced a lone photon's speck by its window's mean, and an
+    estimate that reads the pixel's own photons (the narrow kernel, the learned filter)
+    would paint the speck back: the filter did, some 50 specks on the floor of the glass
+    egg's default render (2026-11-29). As passes add photons no pixel stays sparse: the move
+    is the estimate's."""
     move = estimate - stats.spread
     sparse = stats.own_count < SPARSE_PHOTONS
     if not sparse.any():
         return move
-    allowed = (
-        z * stats.spread[sparse] / np.sqrt(np.maximum(stats.spread_count[sparse], 1.0))[:, None]
-    )
-    reach = np.maximum(np.abs(move[sparse]), allowed)
-    keep = np.divide(allowed, reach, out=np.ones_like(reach), where=reach > 0).min(axis=1)
-    move[sparse] *= keep[:, None]
+    # one error for the three channels, from the brightest (a channel the light lacks, 0
+    # there, would otherwise hold the whole move at 0); the running box sums leave -1e-17
+    # where the image is dark: radiance is never negative
+    brightest = np.maximum(stats.spread[sparse].max(axis=1), 0.0)
+    allowed = z * brightest / np.sqrt(np.maximum(stats.spread_count[sparse], 1.0))
+    reach = np.maximum(np.abs(move[sparse]).max(axis=1), allowed)
+    keep = np.divide(allowed, reach, out=np.ones_like(reach), where=reach > 0)
+    with np.errstate(invalid="ignore"):  # (0·inf: an inf move held at 0, made 0 below)
+        held = keep[:, None] * move[sparse]
+    move[sparse] = np.where(np.isfinite(held), held, 0.0)
     return move
 
 
