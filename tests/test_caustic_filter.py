@@ -308,3 +308,48 @@ def test_the_halves_keep_a_filter_that_helps_and_turn_down_one_that_hurts(
     assert 0.6 < oracle, oracle  # the reference itself: about all of its move
     assert weight_of(scene, 8, lambda s: 3 * s.spread, monkeypatch) == 0.0  # thrice too bright
     assert weight_of(scene, 8, lambda s: s.spread, monkeypatch) == 1.0  # no move: as it is
+
+
+def test_the_filters_inputs_and_clamp_equal_their_numpy_formulas() -> None:
+    """`features`, `candidates` and `clamp_to_own` run in Numba, one pass over the pixels: the
+    same values as their NumPy formulas (scipy's box means over the pixels inside the image;
+    the clamp's share of the move from the pixel's own estimate), on random statistics with
+    empty, sparse and dense discs."""
+    from scipy.ndimage import uniform_filter
+
+    from dpm.caustic.stats import clamp_to_own
+
+    rng = np.random.default_rng(3)
+    h, w = 13, 17
+    p = h * w
+    count = rng.choice([0.0, 0.5, 3.0, 40.0], p)
+    wide, narrow, own, spread = (rng.gamma(0.5, 2.0, (p, 3)) for _ in range(4))
+    albedo, normal = rng.uniform(0, 1, (p, 3)), rng.normal(size=(p, 3))
+    albedo[:5] = 0.0  # pixels that see no surface
+    s = CausticStats(h, w, 7, wide, narrow, count, count / 3, own, count, spread, count,
+                     rng.uniform(0.1, 4.0, p), rng.normal(size=p), albedo, normal)  # fmt: skip
+    lw, ln, ls = luminance(wide), luminance(narrow), luminance(spread)
+    scale = lw[albedo.max(axis=1) > 0].mean()
+    expected = np.stack([
+        np.log1p(lw / scale), np.log1p(ln / scale), np.log1p(ls / scale),
+        np.log1p(count) / 4, np.log1p(count / 3) / 4, 1 / np.sqrt(np.maximum(count, 1)),
+        np.log(np.maximum(s.radius, 1e-3)), *albedo.T, *normal.T, s.depth,
+        np.full(p, np.log1p(7) / 4)], axis=1).astype(np.float32)  # fmt: skip
+    np.testing.assert_allclose(features(s).reshape(p, -1), expected, rtol=1e-6, atol=1e-7)
+    image = wide.reshape(h, w, 3)
+    means = []
+    for size in (3, 9):
+        inside = uniform_filter(np.ones((h, w)), size, mode="constant")
+        means.append(uniform_filter(image, (size, size, 1), mode="constant") / inside[..., None])
+    want = np.stack([image, narrow.reshape(h, w, 3), *means, spread.reshape(h, w, 3)])
+    np.testing.assert_allclose(candidates(s), np.maximum(want, 0), rtol=1e-6, atol=1e-12)
+    filtered = own * rng.uniform(0.2, 3.0, (p, 3))
+    photon = s.photon_value()
+    error = np.where(count[:, None] > 0,
+                     np.maximum(own, filtered) / np.sqrt(np.maximum(count, 1))[:, None],
+                     np.minimum(filtered, photon))  # fmt: skip
+    allowed = CLAMP_Z * error + 1e-12
+    keep = (allowed / np.maximum(np.abs(filtered - own) + 1e-12, allowed)).min(axis=1)
+    held = (1 - keep[:, None]) * own + keep[:, None] * filtered
+    np.testing.assert_allclose(clamp_to_own(s, filtered), held, rtol=1e-12)
+    assert 0 < keep.min() < 1 and keep.max() == 1  # some moves held, some not

@@ -12,10 +12,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba as nb
 import numpy as np
 
-from dpm.density.base import luminance
-from dpm.filters import box_mean
+from dpm.density.base import LUMINANCE, luminance
 
 CHANNELS = 15  # features per pixel (`features`)
 # (candidate, dilation, taps per side) of `candidates`: the wide and the narrow estimates at
@@ -69,29 +69,78 @@ def features(s: CausticStats) -> np.ndarray:
     """(h, w, CHANNELS) float32 scale-free inputs of the filter network per pixel: log
     radiance (wide, narrow, spread) over the image's mean, log photon counts, relative error, log
     radius in footprints, albedo, normal, relative depth, log passes."""
-    lw, ln, ls = luminance(s.wide), luminance(s.narrow), luminance(s.spread)
     hit = s.albedo.max(axis=1) > 0
-    scale = max(float(lw[hit].mean()) if hit.any() else 0.0, 1e-30)
-    cols = [
-        np.log1p(lw / scale), np.log1p(ln / scale), np.log1p(ls / scale),
-        np.log1p(s.wide_count) / 4, np.log1p(s.narrow_count) / 4,
-        1 / np.sqrt(np.maximum(s.wide_count, 1)), np.log(np.maximum(s.radius, 1e-3)),
-        *s.albedo.T, *s.normal.T, s.depth, np.full(len(lw), np.log1p(s.passes) / 4),
-    ]  # fmt: skip
-    return np.stack(cols, axis=1).astype(np.float32).reshape(s.h, s.w, CHANNELS)
+    scale = max(float(luminance(s.wide[hit]).mean()) if hit.any() else 0.0, 1e-30)
+    out = np.empty((s.h * s.w, CHANNELS), np.float32)
+    _features(s.wide, s.narrow, s.spread, s.wide_count, s.narrow_count, s.radius, s.albedo,
+              s.normal, s.depth, scale, np.log1p(s.passes) / 4, out)  # fmt: skip
+    return out.reshape(s.h, s.w, CHANNELS)
+
+
+@nb.njit(cache=True, parallel=True, error_model="numpy")
+def _features(
+    wide: np.ndarray, narrow: np.ndarray, spread: np.ndarray, wide_count: np.ndarray,
+    narrow_count: np.ndarray, radius: np.ndarray, albedo: np.ndarray, normal: np.ndarray,
+    depth: np.ndarray, scale: float, passes: float, out: np.ndarray,
+) -> None:  # fmt: skip
+    """out (P, CHANNELS) float32: `features`' columns pixel by pixel (one pass over the
+    pixels where the NumPy form made a (P,) temporary per column: 9 ms a call at 256²)."""
+    r, g, b = LUMINANCE
+    for i in nb.prange(out.shape[0]):
+        lw = wide[i, 0] * r + wide[i, 1] * g + wide[i, 2] * b
+        ln = narrow[i, 0] * r + narrow[i, 1] * g + narrow[i, 2] * b
+        ls = spread[i, 0] * r + spread[i, 1] * g + spread[i, 2] * b
+        row = out[i]
+        row[0], row[1], row[2] = np.log1p(lw / scale), np.log1p(ln / scale), np.log1p(ls / scale)
+        row[3], row[4] = np.log1p(wide_count[i]) / 4, np.log1p(narrow_count[i]) / 4
+        row[5] = 1 / np.sqrt(max(wide_count[i], 1.0))
+        row[6] = np.log(max(radius[i], 1e-3))
+        for c in range(3):
+            row[7 + c], row[10 + c] = albedo[i, c], normal[i, c]
+        row[13], row[14] = depth[i], passes
 
 
 def candidates(s: CausticStats) -> np.ndarray:
     """(5, h, w, 3) float32 the estimates the kernel weighs: wide, narrow, the wide one's
     3 × 3 and 9 × 9 means (over the pixels inside the image), and the spread one."""
+    out = np.empty((len(CANDIDATES), s.h, s.w, 3), np.float32)
     wide = s.wide.reshape(s.h, s.w, 3)
-    means = []
-    for size in (3, 9):
-        inside = box_mean(np.ones((s.h, s.w)), size)
-        means.append(box_mean(wide, (size, size, 1)) / inside[..., None])
-    narrow, spread = (a.reshape(s.h, s.w, 3) for a in (s.narrow, s.spread))
+    out[0], out[1] = wide, s.narrow.reshape(s.h, s.w, 3)
+    for c, size in ((2, 3), (3, 9)):
+        _window_mean(wide, size, out[c])
+    out[4] = s.spread.reshape(s.h, s.w, 3)
     # running box sums leave -1e-17 where the image is dark: radiance is never negative
-    return np.maximum(np.stack([wide, narrow, *means, spread]), 0.0).astype(np.float32)
+    return np.maximum(out, 0.0, out=out)
+
+
+@nb.njit(cache=True, parallel=True, error_model="numpy")
+def _window_mean(a: np.ndarray, size: int, out: np.ndarray) -> None:
+    """out (h, w, 3) float32: the mean of a (h, w, 3) float64 over each pixel's size × size
+    window's pixels inside the image (rows summed first, then the rows' sums; each loop runs
+    along an image row, contiguous, so LLVM vectorizes it)."""
+    h, w, _ = a.shape
+    half = size // 2
+    flat = a.reshape(h, w * 3)
+    rows = np.zeros((h, w * 3))
+    for y in nb.prange(h):
+        for d in range(-half, half + 1):  # the row shifted by d, where it lies inside
+            x0, x1 = max(0, -d), min(w, w - d)
+            src, dst = flat[y, (x0 + d) * 3 : (x1 + d) * 3], rows[y, x0 * 3 : x1 * 3]
+            for i in range(len(dst)):
+                dst[i] += src[i]
+    columns = np.empty(w * 3)  # the pixels of each column's window inside the image
+    for x in range(w):
+        columns[3 * x : 3 * x + 3] = min(w, x + half + 1) - max(0, x - half)
+    for y in nb.prange(h):
+        y0, y1 = max(0, y - half), min(h, y + half + 1)
+        total = np.zeros(w * 3)
+        for yy in range(y0, y1):
+            r = rows[yy]
+            for i in range(w * 3):
+                total[i] += r[i]
+        o = out[y].reshape(w * 3)
+        for i in range(w * 3):
+            o[i] = total[i] / ((y1 - y0) * columns[i])
 
 
 def tap_offsets() -> np.ndarray:
@@ -108,20 +157,33 @@ def centre_tap() -> int:
 
 def clamp_to_own(s: CausticStats, filtered: np.ndarray) -> np.ndarray:
     """(P, 3) float64: `filtered` (P, 3) moved back toward the pixel's own estimate until
-    every channel lies within CLAMP_Z standard errors of the own one's (`reach`), so as passes
+    every channel lies within CLAMP_Z standard errors of the own one's (`_clamp`), so as passes
     add photons the result converges to the own (consistent) estimate whatever the network
     says, colour included."""
-    keep = reach(s.own, filtered, s.own_count, s.photon_value())
-    return (1 - keep[:, None]) * s.own + keep[:, None] * filtered  # a sum of non-negatives
+    out = np.empty((len(s.own), 3))
+    _clamp(s.own, np.asarray(filtered, np.float64), s.own_count, s.photon_value(), CLAMP_Z, out)
+    return out  # a sum of non-negatives
 
 
-def reach(own: np.ndarray, filtered: np.ndarray, count: np.ndarray, photon: float) -> np.ndarray:
-    """(P,) the share of the move from own (P, 3) to filtered (P, 3) that keeps each channel
-    within CLAMP_Z standard errors: 1/√count of the larger of the two values where the disc
-    holds `count` (P,) photons, else the smaller of the filtered value and one photon's
-    luminance `photon` (both shrink as passes add photons and paths)."""
-    error = np.where(count[:, None] > 0,
-                     np.maximum(own, filtered) / np.sqrt(np.maximum(count, 1))[:, None],
-                     np.minimum(filtered, photon))  # fmt: skip
-    allowed = CLAMP_Z * error + TINY
-    return (allowed / np.maximum(np.abs(filtered - own) + TINY, allowed)).min(axis=1)
+@nb.njit(cache=True, parallel=True, error_model="numpy")
+def _clamp(
+    own: np.ndarray, filtered: np.ndarray, count: np.ndarray, photon: float, z: float,
+    out: np.ndarray,
+) -> None:  # fmt: skip
+    """out (P, 3) = own + keep·(filtered − own), keep the largest share of the move from own
+    (P, 3) to filtered (P, 3) that keeps each channel within z standard errors: 1/√count of
+    the larger of the two values where the disc holds count (P,) photons, else the smaller of
+    the filtered value and one photon's luminance `photon` (both shrink as passes add photons
+    and paths). One pass over the pixels (the NumPy form made a dozen (P, 3) temporaries)."""
+    for i in nb.prange(own.shape[0]):
+        keep = np.inf
+        for c in range(3):
+            o, f = own[i, c], filtered[i, c]
+            if count[i] > 0:
+                error = max(o, f) / np.sqrt(max(count[i], 1.0))
+            else:
+                error = min(f, photon)
+            allowed = z * error + TINY
+            keep = min(keep, allowed / max(abs(f - o) + TINY, allowed))
+        for c in range(3):
+            out[i, c] = (1 - keep) * own[i, c] + keep * filtered[i, c]

@@ -50,6 +50,7 @@ from contextlib import nullcontext
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
+import numba as nb
 import numpy as np
 from tqdm import tqdm
 
@@ -136,9 +137,13 @@ SQRT2 = np.sqrt(2.0)  # a half's standard error per pixel, in the whole image's
 # (the dragon at 2 and 8 paths +20 % and +2 %, the red wine +29 % and +11 %, mixed at 32
 # paths): there it is left off.
 CLEAN_GUIDE_PATHS = 8
-# The learned caustic filter's seconds per pixel on 2 cores (measured), and the most of a
-# --time budget it may take: past it the plan leaves it out.
-NETWORK_SECONDS_PER_PIXEL, NETWORK_SHARE = 4e-6, 0.15
+# The learned caustic filter's seconds (a fixed part and per pixel) on 2 cores, and the most
+# of a --time budget it may take: past it the plan leaves it out. Measured whole-process
+# (`dpm-render --component caustic --time 4 --network`, glass egg, pool2, dragon, torus; Zen 4,
+# idle): 0.046-0.055 s at 128², 0.10-0.12 at 256², 0.22-0.28 at 384², 0.53-0.56 at 512² (its
+# arrays outgrow the caches). The prediction keeps the budget's reserve for it: 4 µs a pixel,
+# as before the filter's statistics moved into Numba, left 0.15 s of a 2-s render at 256² idle.
+NETWORK_SECONDS, NETWORK_SECONDS_PER_PIXEL, NETWORK_SHARE = 0.02, 2e-6, 0.15
 
 
 @dataclass
@@ -156,6 +161,11 @@ class Plan:
                 "network": self.network, "reason": self.reason}  # fmt: skip
 
 
+def network_seconds(pixels: int) -> float:
+    """The learned caustic filter's predicted seconds for an image of `pixels` pixels."""
+    return NETWORK_SECONDS + NETWORK_SECONDS_PER_PIXEL * pixels
+
+
 def plan_network(
     plan: Plan, wanted: bool | None, pixels: int, budget: float | None, shipped: bool = True
 ) -> Plan:
@@ -171,7 +181,7 @@ def plan_network(
         return plan
     if wanted is False:
         return without("--no-network")
-    cost = NETWORK_SECONDS_PER_PIXEL * pixels
+    cost = network_seconds(pixels)
     if wanted is None and budget is not None and cost > NETWORK_SHARE * budget:
         return without(f"its {cost:.2f} s would be over {NETWORK_SHARE:.0%} of the budget")
     if not shipped:
@@ -291,21 +301,36 @@ def held_move(stats: CausticStats, estimate: np.ndarray, z: float) -> np.ndarray
     would paint the speck back: the filter did, some 50 specks on the floor of the glass
     egg's default render (2026-11-29). As passes add photons no pixel stays sparse: the move
     is the estimate's."""
-    move = estimate - stats.spread
-    sparse = stats.own_count < SPARSE_PHOTONS
-    if not sparse.any():
-        return move
-    # one error for the three channels, from the brightest (a channel the light lacks, 0
-    # there, would otherwise hold the whole move at 0); the running box sums leave -1e-17
-    # where the image is dark: radiance is never negative
-    brightest = np.maximum(stats.spread[sparse].max(axis=1), 0.0)
-    allowed = z * brightest / np.sqrt(np.maximum(stats.spread_count[sparse], 1.0))
-    reach = np.maximum(np.abs(move[sparse]).max(axis=1), allowed)
-    keep = np.divide(allowed, reach, out=np.ones_like(reach), where=reach > 0)
-    with np.errstate(invalid="ignore"):  # (0·inf: an inf move held at 0, made 0 below)
-        held = keep[:, None] * move[sparse]
-    move[sparse] = np.where(np.isfinite(held), held, 0.0)
+    move = np.asarray(estimate, np.float64) - stats.spread
+    _hold_sparse(move, stats.spread, stats.own_count, stats.spread_count, float(z))
     return move
+
+
+@nb.njit(cache=True, parallel=True, error_model="numpy")
+def _hold_sparse(
+    move: np.ndarray, spread: np.ndarray, count: np.ndarray, behind: np.ndarray, z: float
+) -> None:  # fmt: skip
+    """`held_move`'s hold, in place on move (P, 3), at the pixels whose count (P,) is below
+    SPARSE_PHOTONS: one share for the three channels, from the brightest spread (P, 3) channel
+    (a channel the light lacks, 0 there, would otherwise hold the whole move at 0; the
+    running box sums leave -1e-17 where the image is dark: radiance is never negative) over
+    √ its window's photons behind (P,); a move that is not finite (or 0·inf) held at 0."""
+    for i in nb.prange(move.shape[0]):
+        if not count[i] < SPARSE_PHOTONS:
+            continue
+        brightest = max(max(spread[i, 0], spread[i, 1], spread[i, 2]), 0.0)
+        allowed = z * brightest / np.sqrt(max(behind[i], 1.0))
+        reach = allowed
+        for c in range(3):
+            a = abs(move[i, c])
+            if a != a:  # NaN: nothing to keep the share by (held to 0 below)
+                reach = a
+                break
+            reach = max(reach, a)
+        keep = allowed / reach if reach > 0 else 1.0
+        for c in range(3):
+            held = keep * move[i, c]
+            move[i, c] = held if np.isfinite(held) else 0.0
 
 
 def half_state(halves: PassHalves, half: int, k: int, like: PPMState) -> PPMState:
@@ -334,24 +359,56 @@ def spread_sparse(
     sparse = count < SPARSE_PHOTONS
     if not sparse.any():
         return caustic, count
-    member = sparse.reshape(h, w).astype(np.float64)
-    values = np.where(sparse[:, None], caustic, 0.0).reshape(h, w, 3)
-    photons = np.where(sparse, count / np.maximum(overlap, 1.0), 0.0).reshape(h, w)
-    out, todo = caustic.copy(), sparse.reshape(h, w).copy()
-    behind = count.astype(np.float64).reshape(h, w)
-    for i, size in enumerate(SPREAD_WINDOWS):
-        # window means of the sparse pixels: sums over the window / its sparse pixels
-        n = box_mean(member, size, mode="constant")
-        found = box_mean(photons, size, mode="constant") * size * size
-        take = todo & ((found >= SPARSE_PHOTONS) | (i == len(SPREAD_WINDOWS) - 1)) & (n > 0)
-        if take.any():
-            mean = (
-                box_mean(values, (size, size, 1), mode="constant") / np.maximum(n, 1e-30)[..., None]
-            )
-            out.reshape(h, w, 3)[take] = mean[take]
-            behind[take] = found[take]
-            todo &= ~take
-    return out, behind.ravel()
+    out, behind = caustic.astype(np.float64), count.astype(np.float64)
+    _spread(out, behind, np.asarray(overlap, np.float64), h, w, np.array(SPREAD_WINDOWS))
+    return out, behind
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _spread(
+    caustic: np.ndarray, count: np.ndarray, overlap: np.ndarray, h: int, w: int,
+    windows: np.ndarray,
+) -> None:  # fmt: skip
+    """`spread_sparse` in place on caustic (P, 3) and count (P,), from summed-area tables of
+    the sparse pixels (1 each), their photons (count / overlap) and their radiance: each
+    window's sums are four reads, so a pixel tries the windows in turn for the cost of one
+    (running box sums over the whole image per window took 18 ms a call at 256²). The
+    tables are summed in one order, whatever the threads."""
+    table = np.zeros((h + 1, w + 1, 5))  # sparse pixels, photons, red, green, blue
+    for y in range(h):
+        for x in range(w):
+            i = y * w + x
+            if count[i] < SPARSE_PHOTONS:
+                add = (1.0, count[i] / max(overlap[i], 1.0), caustic[i, 0], caustic[i, 1],
+                       caustic[i, 2])  # fmt: skip
+            else:
+                add = (0.0, 0.0, 0.0, 0.0, 0.0)
+            for c in range(5):
+                table[y + 1, x + 1, c] = (add[c] + table[y, x + 1, c] + table[y + 1, x, c]
+                                          - table[y, x, c])  # fmt: skip
+    last = len(windows) - 1
+    for y in range(h):
+        for x in range(w):
+            i = y * w + x
+            if not count[i] < SPARSE_PHOTONS:
+                continue
+            for k in range(len(windows)):
+                half = windows[k] // 2
+                y0, y1 = max(0, y - half), min(h, y + half + 1)
+                x0, x1 = max(0, x - half), min(w, x + half + 1)
+                found = _box(table, y0, y1, x0, x1, 1)
+                if found >= SPARSE_PHOTONS or k == last:
+                    n = _box(table, y0, y1, x0, x1, 0)  # ≥ 1: the pixel itself
+                    for c in range(3):
+                        caustic[i, c] = _box(table, y0, y1, x0, x1, 2 + c) / n
+                    count[i] = found
+                    break
+
+
+@nb.njit(cache=True, inline="always")
+def _box(table: np.ndarray, y0: int, y1: int, x0: int, x1: int, c: int) -> float:
+    """Sum of channel c over rows [y0, y1) and columns [x0, x1) from a summed-area table."""
+    return table[y1, x1, c] - table[y0, x1, c] - table[y1, x0, c] + table[y0, x0, c]
 
 
 class Auto(Method):
@@ -666,7 +723,7 @@ class Passes:
                     self.filter = caustic_forward.load_filter(
                         self.o.weights or caustic_forward.SHIPPED
                     )
-                    self.finish_seconds += NETWORK_SECONDS_PER_PIXEL * self.pixels
+                    self.finish_seconds += network_seconds(self.pixels)
 
     def finish_reserve(self, k: int = 0) -> float:
         """Seconds to keep for the finish were the render to stop after a pass of k more
