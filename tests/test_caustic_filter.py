@@ -151,6 +151,25 @@ def test_the_shipped_filter_is_used_by_default_and_no_network_turns_it_off(glass
     assert not np.array_equal(on.image, off.image)
 
 
+def test_the_plan_leaves_the_filter_out_where_its_time_is_over_its_share() -> None:
+    """`plan_network`: the filter's predicted seconds (a fixed part and per pixel) against
+    NETWORK_SHARE of the budget; --network keeps it, --no-network and a render without
+    caustics leave it out, and a render without a budget always has it."""
+    from dpm.methods import auto
+
+    plan = auto.Plan("sppm", 1000, "caustics")
+    pixels = 256 * 256
+    fits = auto.network_seconds(pixels) / auto.NETWORK_SHARE  # the least budget that holds it
+    assert auto.plan_network(plan, None, pixels, fits * 1.01).network
+    assert auto.plan_network(plan, None, pixels, None).network
+    tight = auto.plan_network(plan, None, pixels, fits * 0.99)
+    assert not tight.network and "over 15% of the budget" in tight.reason
+    assert auto.plan_network(plan, True, pixels, fits * 0.99).network
+    assert not auto.plan_network(plan, False, pixels, None).network
+    assert not auto.plan_network(auto.Plan("off", 0, "none"), True, pixels, None).network
+    assert auto.network_seconds(4 * pixels) > 3 * auto.network_seconds(pixels)
+
+
 @pytest.fixture
 def glass(tmp_path: Path):
     return load_scene(write_scene(tmp_path, GLASS_OBJ, GLASS_MTL, CAMERA))
