@@ -293,14 +293,15 @@ def kernel_output(weights: FilterWeights, feats: np.ndarray, cands: np.ndarray) 
 
 def warm() -> None:
     """Compile (or load from Numba's cache) the kernels, on a one-pixel image and weights of
-    the right types (no file read)."""
+    the right types (no file read): the network's and its statistics' (`filter_caustics`)."""
     w = 1
     kernels = tuple(np.zeros((3, 3, n, w), np.float32) for n in (CHANNELS,) + (w,) * (LAYERS - 1))
     biases = tuple(np.zeros(w, np.float32) for _ in range(LAYERS))
     weights = FilterWeights(kernels, biases, np.zeros((w, TAPS), np.float32),
                             np.zeros(TAPS, np.float32))  # fmt: skip
-    cands = np.zeros((len(CANDIDATES), 1, 1, 3), np.float32)
-    kernel_output(weights, np.zeros((1, 1, CHANNELS), np.float32), cands)
+    one, rgb = np.ones(1), np.ones((1, 3))
+    filter_caustics(weights, CausticStats(1, 1, 1, rgb, rgb, one, one, rgb, one, rgb, one, one,
+                                          one, rgb, rgb))  # fmt: skip
 
 
 def filter_caustics(weights: FilterWeights, stats: CausticStats) -> np.ndarray:

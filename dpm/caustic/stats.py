@@ -65,6 +65,13 @@ class CausticStats:
         return float(luminance(self.wide[held]).sum() / self.wide_count[held].sum())
 
 
+def f64(a: np.ndarray) -> np.ndarray:
+    """a as a C-contiguous float64 array (a copy only where it is not one): the Numba kernels
+    here and in `auto` are compiled for those types alone, and warmed on them in the first
+    pass (`dpm.caustic.forward.warm`), so the finish never stops to compile another."""
+    return np.ascontiguousarray(a, np.float64)
+
+
 def features(s: CausticStats) -> np.ndarray:
     """(h, w, CHANNELS) float32 scale-free inputs of the filter network per pixel: log
     radiance (wide, narrow, spread) over the image's mean, log photon counts, relative error, log
@@ -72,8 +79,9 @@ def features(s: CausticStats) -> np.ndarray:
     hit = s.albedo.max(axis=1) > 0
     scale = max(float(luminance(s.wide[hit]).mean()) if hit.any() else 0.0, 1e-30)
     out = np.empty((s.h * s.w, CHANNELS), np.float32)
-    _features(s.wide, s.narrow, s.spread, s.wide_count, s.narrow_count, s.radius, s.albedo,
-              s.normal, s.depth, scale, np.log1p(s.passes) / 4, out)  # fmt: skip
+    arrays = (s.wide, s.narrow, s.spread, s.wide_count, s.narrow_count, s.radius, s.albedo,
+              s.normal, s.depth)  # fmt: skip
+    _features(*map(f64, arrays), scale, float(np.log1p(s.passes) / 4), out)
     return out.reshape(s.h, s.w, CHANNELS)
 
 
@@ -104,7 +112,7 @@ def candidates(s: CausticStats) -> np.ndarray:
     """(5, h, w, 3) float32 the estimates the kernel weighs: wide, narrow, the wide one's
     3 × 3 and 9 × 9 means (over the pixels inside the image), and the spread one."""
     out = np.empty((len(CANDIDATES), s.h, s.w, 3), np.float32)
-    wide = s.wide.reshape(s.h, s.w, 3)
+    wide = f64(s.wide).reshape(s.h, s.w, 3)
     out[0], out[1] = wide, s.narrow.reshape(s.h, s.w, 3)
     for c, size in ((2, 3), (3, 9)):
         _window_mean(wide, size, out[c])
@@ -161,7 +169,7 @@ def clamp_to_own(s: CausticStats, filtered: np.ndarray) -> np.ndarray:
     add photons the result converges to the own (consistent) estimate whatever the network
     says, colour included."""
     out = np.empty((len(s.own), 3))
-    _clamp(s.own, np.asarray(filtered, np.float64), s.own_count, s.photon_value(), CLAMP_Z, out)
+    _clamp(f64(s.own), f64(filtered), f64(s.own_count), s.photon_value(), CLAMP_Z, out)
     return out  # a sum of non-negatives
 
 

@@ -59,7 +59,7 @@ from dpm.camera import Camera
 from dpm.caustic import forward as caustic_forward
 from dpm.caustic.blend import blend_weights
 from dpm.caustic.halves import PassHalves
-from dpm.caustic.stats import CLAMP_Z, CausticStats
+from dpm.caustic.stats import CLAMP_Z, CausticStats, f64
 from dpm.denoise import denoise, guides, restore_certain
 from dpm.density.base import luminance
 from dpm.density.progressive import pass_seed
@@ -251,6 +251,10 @@ def warm_first_kernels(scene: Scene, bvh: BVH, camera: Camera) -> None:
     sppm_gather(states, points, photons, Stopwatch())
     halves.add(0, states, 256)
     box_mean(np.zeros((2, 2)), 3)  # (the finish's: a budget's reserve holds no compiling)
+    rgb, zero = np.ones((4, 3)), np.zeros(4)  # the finish's caustic estimate, as `caustics`
+    spread = spread_sparse(rgb, zero, np.ones(4), 2, 2)
+    held_move(CausticStats(2, 2, 1, rgb, rgb, zero, zero, rgb, zero, *spread, zero, zero, rgb,
+                           rgb), rgb, 0.0)  # fmt: skip
 
 
 def warm_later_kernels(
@@ -301,8 +305,8 @@ def held_move(stats: CausticStats, estimate: np.ndarray, z: float) -> np.ndarray
     would paint the speck back: the filter did, some 50 specks on the floor of the glass
     egg's default render (2026-11-29). As passes add photons no pixel stays sparse: the move
     is the estimate's."""
-    move = np.asarray(estimate, np.float64) - stats.spread
-    _hold_sparse(move, stats.spread, stats.own_count, stats.spread_count, float(z))
+    move = f64(estimate - stats.spread)
+    _hold_sparse(move, f64(stats.spread), f64(stats.own_count), f64(stats.spread_count), float(z))
     return move
 
 
@@ -359,8 +363,8 @@ def spread_sparse(
     sparse = count < SPARSE_PHOTONS
     if not sparse.any():
         return caustic, count
-    out, behind = caustic.astype(np.float64), count.astype(np.float64)
-    _spread(out, behind, np.asarray(overlap, np.float64), h, w, np.array(SPREAD_WINDOWS))
+    out, behind = f64(caustic).copy(), f64(count).copy()
+    _spread(out, behind, f64(overlap), h, w, np.array(SPREAD_WINDOWS, np.int64))
     return out, behind
 
 
