@@ -372,3 +372,12 @@ def test_the_filters_inputs_and_clamp_equal_their_numpy_formulas() -> None:
     held = (1 - keep[:, None]) * own + keep[:, None] * filtered
     np.testing.assert_allclose(clamp_to_own(s, filtered), held, rtol=1e-12)
     assert 0 < keep.min() < 1 and keep.max() == 1  # some moves held, some not
+    for h, w in ((6, 1), (6, 2), (6, 3), (2, 9)):  # images narrower than the 9 × 9 window
+        p, one = h * w, np.ones(h * w)
+        rgb = rng.uniform(0.5, 2.0, (p, 3))
+        s = CausticStats(h, w, 1, rgb, rgb, one, one, rgb, one, rgb, one, one, one, rgb, rgb)
+        image = rgb.reshape(h, w, 3)
+        for c, size in ((2, 3), (3, 9)):
+            inside = uniform_filter(np.ones((h, w)), size, mode="constant")
+            want = uniform_filter(image, (size, size, 1), mode="constant") / inside[..., None]
+            np.testing.assert_allclose(candidates(s)[c], want, rtol=1e-6)

@@ -133,6 +133,8 @@ def _window_mean(a: np.ndarray, size: int, out: np.ndarray) -> None:
     for y in nb.prange(h):
         for d in range(-half, half + 1):  # the row shifted by d, where it lies inside
             x0, x1 = max(0, -d), min(w, w - d)
+            if x1 <= x0:  # (an image narrower than the shift: a negative x1 would wrap)
+                continue
             src, dst = flat[y, (x0 + d) * 3 : (x1 + d) * 3], rows[y, x0 * 3 : x1 * 3]
             for i in range(len(dst)):
                 dst[i] += src[i]
