@@ -16,6 +16,7 @@ import numba as nb
 import numpy as np
 
 from dpm.density.base import LUMINANCE, luminance
+from dpm.filters import box_mean
 
 CHANNELS = 15  # features per pixel (`features`)
 # (candidate, dilation, taps per side) of `candidates`: the wide and the narrow estimates at
@@ -111,46 +112,14 @@ def _features(
 def candidates(s: CausticStats) -> np.ndarray:
     """(5, h, w, 3) float32 the estimates the kernel weighs: wide, narrow, the wide one's
     3 × 3 and 9 × 9 means (over the pixels inside the image), and the spread one."""
-    out = np.empty((len(CANDIDATES), s.h, s.w, 3), np.float32)
-    wide = f64(s.wide).reshape(s.h, s.w, 3)
-    out[0], out[1] = wide, s.narrow.reshape(s.h, s.w, 3)
-    for c, size in ((2, 3), (3, 9)):
-        _window_mean(wide, size, out[c])
-    out[4] = s.spread.reshape(s.h, s.w, 3)
+    wide = s.wide.reshape(s.h, s.w, 3)
+    means = []
+    for size in (3, 9):
+        inside = box_mean(np.ones((s.h, s.w)), size)
+        means.append(box_mean(wide, (size, size, 1)) / inside[..., None])
+    narrow, spread = (a.reshape(s.h, s.w, 3) for a in (s.narrow, s.spread))
     # running box sums leave -1e-17 where the image is dark: radiance is never negative
-    return np.maximum(out, 0.0, out=out)
-
-
-@nb.njit(cache=True, parallel=True, error_model="numpy")
-def _window_mean(a: np.ndarray, size: int, out: np.ndarray) -> None:
-    """out (h, w, 3) float32: the mean of a (h, w, 3) float64 over each pixel's size × size
-    window's pixels inside the image (rows summed first, then the rows' sums; each loop runs
-    along an image row, contiguous, so LLVM vectorizes it)."""
-    h, w, _ = a.shape
-    half = size // 2
-    flat = a.reshape(h, w * 3)
-    rows = np.zeros((h, w * 3))
-    for y in nb.prange(h):
-        for d in range(-half, half + 1):  # the row shifted by d, where it lies inside
-            x0, x1 = max(0, -d), min(w, w - d)
-            if x1 <= x0:  # (an image narrower than the shift: a negative x1 would wrap)
-                continue
-            src, dst = flat[y, (x0 + d) * 3 : (x1 + d) * 3], rows[y, x0 * 3 : x1 * 3]
-            for i in range(len(dst)):
-                dst[i] += src[i]
-    columns = np.empty(w * 3)  # the pixels of each column's window inside the image
-    for x in range(w):
-        columns[3 * x : 3 * x + 3] = min(w, x + half + 1) - max(0, x - half)
-    for y in nb.prange(h):
-        y0, y1 = max(0, y - half), min(h, y + half + 1)
-        total = np.zeros(w * 3)
-        for yy in range(y0, y1):
-            r = rows[yy]
-            for i in range(w * 3):
-                total[i] += r[i]
-        o = out[y].reshape(w * 3)
-        for i in range(w * 3):
-            o[i] = total[i] / ((y1 - y0) * columns[i])
+    return np.maximum(np.stack([wide, narrow, *means, spread]), 0.0).astype(np.float32)
 
 
 def tap_offsets() -> np.ndarray:
