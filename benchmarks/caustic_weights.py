@@ -27,6 +27,7 @@ from caustic_references import EXAMPLES, load_reference, size
 
 from common import RESULTS, cpu, geomean, markdown_table
 from dpm import load_scene
+from dpm.methods.auto import PHOTONS_PER_PIXEL
 from dpm.metrics import rmse
 from dpm.options import RenderOptions
 from dpm.renderer import render
@@ -47,8 +48,9 @@ def run(weights: list[Path], passes: list[int], seeds: list[int]) -> list[dict]:
             errors: dict[str, list[float]] = {"plain": []}
             cost: dict[str, list[float]] = {}
             for seed in seeds:
-                base = RenderOptions(component="caustic", spp=p, photons=p * 4 * w * h,
-                                     width=w, height=h, seed=seed, progress=False)  # fmt: skip
+                paths = round(p * PHOTONS_PER_PIXEL * w * h)  # auto's own paths per pass
+                base = RenderOptions(component="caustic", spp=p, photons=paths, width=w,
+                                     height=h, seed=seed, progress=False)  # fmt: skip
                 errors["plain"].append(rmse(render(scene, replace(base, network=False)).image, ref))
                 for f in weights:
                     out = render(scene, replace(base, network=True, weights=f))

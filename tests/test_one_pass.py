@@ -77,12 +77,18 @@ def test_a_pixel_of_unknown_error_keeps_the_denoisers_value() -> None:
 def test_one_pass_is_denoised(egg, reference) -> None:
     # One pass's path samples are mostly noise, with black pixels where a path found no
     # light; the default render denoises them (before, it undid the denoiser everywhere).
-    one = options(spp=1, photons=4 * SIZE * SIZE, seed=1)
-    raw = render(egg, replace(one, denoise=False)).image
-    image = render(egg, one).image
-    assert rmse(image, reference) < 0.95 * rmse(raw, reference)
+    # (three seeds: one pass's linear RMSE is a few fireflies', which one seed can draw
+    # where the denoiser is unsure of them)
     seen = tone_map(reference)  # what a viewer compares
-    assert rmse(tone_map(image), seen) < 0.8 * rmse(tone_map(raw), seen)
+    errors = []
+    for seed in (1, 2, 3):
+        one = options(spp=1, photons=4 * SIZE * SIZE, seed=seed)
+        raw = render(egg, replace(one, denoise=False)).image
+        image = render(egg, one).image
+        errors.append((rmse(image, reference), rmse(raw, reference)))
+        assert rmse(tone_map(image), seen) < 0.8 * rmse(tone_map(raw), seen)
+    denoised, plain = np.mean(errors, axis=0)
+    assert denoised < 0.95 * plain
     lit = reference.max(axis=2) > 0
     paths = render(egg, options(method="pt", spp=1, seed=1)).image  # one path per pixel
     assert ((paths.max(axis=2) <= 0) & lit).sum() > 20  # leaves black pixels
