@@ -52,7 +52,7 @@ from make_unseen import CONTROLS, UNSEEN, unit_scale, unseen_scenes  # noqa: E40
 from common import RESULTS, cpu, geomean, markdown_table  # noqa: E402
 from dpm import load_scene  # noqa: E402
 from dpm.io import read_exr  # noqa: E402
-from dpm.methods.auto import PHOTONS_PER_PIXEL  # noqa: E402
+from dpm.methods.auto import paths_per_pixel  # noqa: E402
 from dpm.metrics import rmse  # noqa: E402
 from dpm.options import RenderOptions  # noqa: E402
 from dpm.renderer import render  # noqa: E402
@@ -83,7 +83,7 @@ def equal_passes(name: str, passes: list[int], seeds: list[int]) -> list[dict]:
         errors = {True: [], False: []}
         for seed in seeds:
             for network in (True, False):
-                paths = round(p * PHOTONS_PER_PIXEL * w * h)  # auto's own paths per pass
+                paths = round(p * paths_per_pixel(scene) * w * h)  # auto's own paths per pass
                 options = RenderOptions(component="caustic", spp=p, photons=paths, width=w,
                                         height=h, seed=seed, network=network,
                                         progress=False)  # fmt: skip

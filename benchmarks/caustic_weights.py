@@ -27,7 +27,7 @@ from caustic_references import EXAMPLES, load_reference, size
 
 from common import RESULTS, cpu, geomean, markdown_table
 from dpm import load_scene
-from dpm.methods.auto import PHOTONS_PER_PIXEL
+from dpm.methods.auto import paths_per_pixel
 from dpm.metrics import rmse
 from dpm.options import RenderOptions
 from dpm.renderer import render
@@ -48,7 +48,7 @@ def run(weights: list[Path], passes: list[int], seeds: list[int]) -> list[dict]:
             errors: dict[str, list[float]] = {"plain": []}
             cost: dict[str, list[float]] = {}
             for seed in seeds:
-                paths = round(p * PHOTONS_PER_PIXEL * w * h)  # auto's own paths per pass
+                paths = round(p * paths_per_pixel(scene) * w * h)  # auto's own paths per pass
                 base = RenderOptions(component="caustic", spp=p, photons=paths, width=w,
                                      height=h, seed=seed, progress=False)  # fmt: skip
                 errors["plain"].append(rmse(render(scene, replace(base, network=False)).image, ref))

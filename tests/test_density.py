@@ -8,6 +8,7 @@ import numba
 import numpy as np
 import pytest
 
+from conftest import water_between_lights
 from dpm import load_scene, stopwatch
 from dpm.density import gather
 from dpm.density.progressive import run_passes
@@ -17,10 +18,12 @@ from dpm.estimators.cppm import CPPM
 from dpm.estimators.reference import ppm_reference
 from dpm.estimators.sppm import sppm_caustics
 from dpm.estimators.tuning import best, rescore, tune, tune_descending, tune_widening
+from dpm.methods.auto import AIMED_PHOTONS_PER_PIXEL, PHOTONS_PER_PIXEL, paths_per_pixel
 from dpm.metrics import rmse
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap, VisiblePoints, build_bvh, trace_photons, trace_visible_points
 from dpm.tracer.photon_grid import grid_irradiance, photon_grid
+from dpm.tracer.photons import aimed_share
 
 EXAMPLES = Path(__file__).parent.parent / "examples" / "scenes"
 
@@ -292,6 +295,20 @@ def test_guided_emission_changes_no_expectation(egg) -> None:
     a = PPM(radius=0.1, photons_per_pass=4_000_000).estimate(points, plain)
     b = PPM(radius=0.1, photons_per_pass=200_000).estimate(points, guided)
     assert float(a.mean()) == pytest.approx(float(b.mean()), rel=0.05)
+
+
+def test_auto_aims_its_photons_where_the_light_is_outside_the_glass(egg, tmp_path) -> None:
+    # The egg's light lies outside the sphere around its glass: every path is aimed, and auto
+    # takes the aimed paths per pixel. Lights inside the sphere (a water sheet between two
+    # lights larger than it) aim nothing, and keep the unaimed paths per pixel.
+    scene, bvh, _ = egg
+    assert aimed_share(scene) == 1.0
+    assert paths_per_pixel(scene) == AIMED_PHOTONS_PER_PIXEL
+    water = load_scene(water_between_lights(tmp_path))
+    assert aimed_share(water) == 0.0 and paths_per_pixel(water) == PHOTONS_PER_PIXEL
+    plain = trace_photons(water, build_bvh(water), 20_000, seed=1, caustic_only=True)
+    same = trace_photons(water, build_bvh(water), 20_000, seed=1, caustic_only=True, guided=True)
+    np.testing.assert_array_equal(plain.flux, same.flux)  # from inside, emission is unchanged
 
 
 def test_a_reference_from_two_ray_tasks_is_the_serial_one(egg, tmp_path: Path) -> None:

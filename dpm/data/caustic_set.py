@@ -32,13 +32,13 @@ def caustic_ladder(
 ) -> list[CausticStats]:
     """`auto`'s caustic statistics (component caustic, its photon paths per pass) after each
     pass count of `ladder` (ascending), from one render with `seed`."""
-    from dpm.methods.auto import PHOTONS_PER_PIXEL, Auto, Passes
+    from dpm.methods.auto import Auto, Passes, paths_per_pixel
     from dpm.options import RenderOptions
     from dpm.stopwatch import Stopwatch
 
     camera = scene.camera
     n = max(ladder)
-    per_pass = round(PHOTONS_PER_PIXEL * camera.width * camera.height)
+    per_pass = round(paths_per_pixel(scene) * camera.width * camera.height)
     options = RenderOptions(method="auto", component="caustic", spp=n, photons=n * per_pass,
                             seed=seed, network=False, progress=False)  # fmt: skip
     passes = Passes(Auto(scene, options), bvh, camera, Stopwatch(), time.monotonic())

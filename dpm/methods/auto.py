@@ -84,16 +84,19 @@ from dpm.tracer import (
     trace_visible_points,
 )
 from dpm.tracer.photon_grid import PhotonGrid, photon_grid
+from dpm.tracer.photons import aimed_share
 from dpm.tracer.sampling import sequence_seed
 
 RADIUS_FOOTPRINTS = 2.0  # initial radius per pixel, in pixel footprints at its first point
-# Photon paths per pass per pixel when the plan keeps caustics. The paths are emitted into
-# the cone of a sphere bounding the mirrors and glass (`trace_photons(guided=True)`): a
-# caustic path must meet one of them first, so no caustic photon is lost, and a path finds
-# 3-30 times the caustic photons of one emitted by the light's cosine (the examples). 2
-# (chosen on the examples at equal time, 2-8 s: caustic RMSE 0.91 of unguided emission at 4,
-# the setting tuned before, against 0.94 at 1 and 0.98 at 4; docs/benchmarks.md)
-PHOTONS_PER_PIXEL = 2.0
+# Photon paths per pass per pixel when the plan keeps caustics (`paths_per_pixel`). The paths
+# are emitted into the cone of a sphere bounding the mirrors and glass (`trace_photons(guided=
+# True)`): a caustic path must meet one of them first, so no caustic photon is lost, and a
+# path finds 3-30 times the caustic photons of one emitted by the light's cosine (the
+# examples). Aimed paths: 2 (chosen on the examples at equal time, 2-8 s: caustic RMSE 0.91 of
+# unaimed emission at 4 paths, against 0.94 at 1 and 0.98 at 4; docs/benchmarks.md). From a
+# light inside the sphere nothing is aimed, and 4 stays (tuned before: benchmarks/
+# auto_tuning.py, best on the ring, tied on glass egg, pool1 and dragon).
+PHOTONS_PER_PIXEL, AIMED_PHOTONS_PER_PIXEL = 4.0, 2.0
 GRID_RADII = 4.0  # first radius at later diffuse vertices, in median first-pass pixel radii
 # Extra camera samples per pass of the light seen in mirrors and glass, per pixel that sees
 # them (each pixel's run through its own stratified sequence, `trace_emitted`), and
@@ -218,10 +221,17 @@ def make_plan(
         return Plan(
             "off", 0, f"the first pass's photons gave {share:.2%} of the light: caustics left out"
         )
-    n = per_pass or max(1, round(PHOTONS_PER_PIXEL * pixels))
-    why = why if per_pass else f"{PHOTONS_PER_PIXEL:g} per pixel"
+    n = per_pass or max(1, round(paths_per_pixel(scene) * pixels))
+    why = why if per_pass else f"{paths_per_pixel(scene):g} per pixel"
     return Plan("sppm", n, f"caustics are {share:.1%} of the first pass's light: sppm, "
                 f"{n:,} photon paths per pass ({why})")  # fmt: skip
+
+
+def paths_per_pixel(scene: Scene) -> float:
+    """Photon paths per pixel per pass: AIMED_PHOTONS_PER_PIXEL for the share of paths that
+    guided emission aims (`aimed_share`), PHOTONS_PER_PIXEL for the rest."""
+    aimed = aimed_share(scene)
+    return aimed * AIMED_PHOTONS_PER_PIXEL + (1.0 - aimed) * PHOTONS_PER_PIXEL
 
 
 def pixel_footprints(points: VisiblePoints, camera: Camera) -> np.ndarray:
@@ -516,7 +526,7 @@ class Passes:
         else:
             self.given, self.why = o.photons_per_pass, "--photons-per-pass"
         self.plan = None if self.separate else make_plan(scene, self.pixels, 1.0, 0.0, None)
-        self.first_photons = self.given or max(1, round(PHOTONS_PER_PIXEL * self.pixels))
+        self.first_photons = self.given or max(1, round(paths_per_pixel(scene) * self.pixels))
         self.dropped = 0
         self.filter = None  # the learned caustic filter's weights, where the plan uses it
         # With mirrors or glass, the light seen along the camera's specular chains (the

@@ -252,3 +252,17 @@ def specular_bounding_sphere(scene: Scene) -> np.ndarray:
     centre = (lo + hi) / 2
     radius = np.sqrt(((v - centre) ** 2).sum(axis=1).max())
     return np.append(centre, radius * (1 + 1e-6) + spawn_offset(scene))
+
+
+def aimed_share(scene: Scene) -> float:
+    """Share (0-1) of emitted photon paths that guided emission aims: those leaving emitter
+    triangles whose centre lies outside `specular_bounding_sphere` (from inside it, emission
+    keeps the light's cosine)."""
+    guide = specular_bounding_sphere(scene)
+    if guide[3] < 0:
+        return 0.0
+    sc = scene.kernel_arrays()
+    picked = np.diff(sc.emitter_cdf, prepend=0.0)  # each emitter's share of the light samples
+    centre = sc.triangles[sc.emitter_triangles].astype(np.float64).mean(axis=1)
+    outside = ((centre - guide[:3]) ** 2).sum(axis=1) > guide[3] ** 2
+    return float(picked[outside].sum())
