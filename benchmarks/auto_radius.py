@@ -7,7 +7,7 @@
 each pixel's first visible point (`dpm.methods.auto`; a second estimate at half of it where
 the two differ clearly, and the learned caustic filter where the plan uses it). Per scene,
 caustic component (`--component caustic`, seed 0), at M and 10·M emitted photon paths in
-auto's own passes of PHOTONS_PER_PIXEL paths per pixel (what a `--time` render plans:
+auto's own passes of `paths_per_pixel` paths per pixel (what a `--time` render plans:
 `--spp` passes sharing `--photons`), the default (no `--radius`) is scored against `--radius`
 at 10 initial radii log-spaced from 0.15 to 6 median pixel widths, extended by three more past
 an edge the best lands on (six more at most), as `sppm_defaults.py` tunes SPPM. Only the
@@ -39,7 +39,7 @@ from make_unseen import unit_scale  # noqa: E402
 from common import RESULTS, M, cpu  # noqa: E402
 from dpm import load_scene  # noqa: E402
 from dpm.io import atomic  # noqa: E402
-from dpm.methods.auto import PHOTONS_PER_PIXEL, RADIUS_FOOTPRINTS  # noqa: E402
+from dpm.methods.auto import RADIUS_FOOTPRINTS, paths_per_pixel  # noqa: E402
 from dpm.metrics import rmse  # noqa: E402
 from dpm.options import RenderOptions  # noqa: E402
 from dpm.renderer import render  # noqa: E402
@@ -49,9 +49,9 @@ OUT = RESULTS / "auto_radius"
 TABLE = RESULTS / "auto_radius.md"
 
 
-def auto_passes(paths: int, pixels: int) -> int:
+def auto_passes(scene, paths: int, pixels: int) -> int:
     """The passes auto's plan splits `paths` photon paths into at `pixels` pixels."""
-    return max(1, round(paths / (PHOTONS_PER_PIXEL * pixels)))
+    return max(1, round(paths / (paths_per_pixel(scene) * pixels)))
 
 
 def run_scene(name: str, set_: str, budgets: tuple[int, ...]) -> dict:
@@ -69,7 +69,7 @@ def run_scene(name: str, set_: str, budgets: tuple[int, ...]) -> dict:
     for n in budgets:
         if n in done:
             continue
-        passes = auto_passes(n, width * height)
+        passes = auto_passes(scene, n, width * height)
 
         def score(radius: float | None, n=n, passes=passes) -> tuple[float, bool]:
             """RMSE of auto's caustics at initial radius `radius` (None: its default) and

@@ -41,7 +41,9 @@ def main() -> None:
         size = {"width": args.width, "height": h, "progress": False}
         render(scene, RenderOptions(spp=2, **size))  # warm-up
         for ppp, footprints in itertools.product(PHOTONS_PER_PIXEL, RADIUS_FOOTPRINTS):
-            auto.PHOTONS_PER_PIXEL, auto.RADIUS_FOOTPRINTS = ppp, footprints
+            # (both paths-per-pixel constants: aimed and not, `auto.paths_per_pixel`)
+            auto.PHOTONS_PER_PIXEL = auto.AIMED_PHOTONS_PER_PIXEL = ppp
+            auto.RADIUS_FOOTPRINTS = footprints
             options = RenderOptions(time=args.time, **size)
             result = render(scene, options, started=time.monotonic())
             s = result.stats["seconds"]
