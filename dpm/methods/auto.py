@@ -221,8 +221,9 @@ def make_plan(
         return Plan(
             "off", 0, f"the first pass's photons gave {share:.2%} of the light: caustics left out"
         )
-    n = per_pass or max(1, round(paths_per_pixel(scene) * pixels))
-    why = why if per_pass else f"{paths_per_pixel(scene):g} per pixel"
+    per_pixel = paths_per_pixel(scene)
+    n = per_pass or max(1, round(per_pixel * pixels))
+    why = why if per_pass else f"{per_pixel:g} per pixel"
     return Plan("sppm", n, f"caustics are {share:.1%} of the first pass's light: sppm, "
                 f"{n:,} photon paths per pass ({why})")  # fmt: skip
 
