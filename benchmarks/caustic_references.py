@@ -15,7 +15,13 @@ longer than its reference was scored against the reference's blur (16-s renders 
 1121 passes). So each unseen scene gets PASSES[name]: at least 4 times the passes of the
 longest 16-s render of `caustic_network.py` (its equal-time table of 2026-11-28), 512 where
 that is more; `--passes` overrides it. What bias is left favours the estimate whose blur
-is nearer the reference's, the render without the network more often than not.
+is nearer the reference's, the render without the network more often than not. The
+examples (`--set examples`, to choose constants on) get EXAMPLE_PASSES: 16 times the passes
+of a 4-s aimed render. `auto` aims its caustic photons (since 2026-11-29), so references
+made since are aimed too: the examples' (made that day on a 16-core Xeon, 7 scenes at once,
+6.6 min) have 2.1-6x less noise than the 512 unaimed passes before them; the unseen scenes'
+are still unaimed, at passes sized for unaimed renders, which aimed renders do not reach
+(they run fewer passes in the same time).
 
 Each scene is rendered at W = min(camera width, MAX_WIDTH), as its Mitsuba reference
 (`equal_time_unseen.py`); a uniformly scaled copy gets none (it is scored against its scale-1
@@ -55,6 +61,10 @@ PASSES = {  # 4x the passes of the longest 16-s render (caustic_network.md, 2026
     "huge_floor": 6800, "concave_mirror": 5300, "tall_vase": 4600, "spheres_s1": 4500,
     "far_wall": 4000, "cardioid_cup": 3300, "lens_wall": 2700, "glass_lantern": 2000,
     "bumpy_blob": 1100, "water_tiles": 900,
+}  # fmt: skip
+EXAMPLE_PASSES = {  # 16x the passes of a 4-s aimed render (4x the 16-s one), 2026-11-29
+    "dragon": 1100, "glass_egg": 1500, "pool1": 2300, "pool2": 2200, "red_wine": 1500,
+    "ring": 2100, "torus": 1500,
 }  # fmt: skip
 
 
@@ -118,7 +128,8 @@ def main() -> None:
     if not names:
         sys.exit(f"no scenes in {folder}: run benchmarks/scenes/make_unseen.py first")
     for name in names:
-        default = PASSES.get(name, DEFAULT_PASSES) if a.set == "unseen" else DEFAULT_PASSES
+        table = PASSES if a.set == "unseen" else EXAMPLE_PASSES
+        default = table.get(name, DEFAULT_PASSES)
         passes = a.passes or default
         make(name, passes, a.set)
 
