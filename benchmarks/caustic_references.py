@@ -1,11 +1,12 @@
-"""Per-pixel caustic references of the unseen scenes, for `auto`'s caustic component.
+"""Per-pixel caustic references of the unseen scenes and the examples (`auto`'s caustics).
 
     python benchmarks/caustic_references.py [--passes N] [--scenes NAME ...] [--set examples]
 
 `auto --component caustic` averages, per pixel, SPPM's estimates at one jittered visible
 point per pass, so its limit is the caustic radiance the camera sees averaged over the
 pixel. The reference is the same estimator run long: `auto --component caustic
---no-network` at `--passes` passes of 4 photon paths per pixel, twice with independent
+--no-network` at `--passes` passes of 4 photon paths per pixel (`auto` takes 2-4: the
+reference's passes gather more), twice with independent
 seeds (the halves, so its noise is known: the RMSE between them over 2 is the mean's). It is
 consistent and shares no sample with any render it scores. Its remaining bias is SPPM's
 after that many passes, and both halves share it, so the noise estimate does not show it:
