@@ -95,7 +95,8 @@ RADIUS_FOOTPRINTS = 2.0  # initial radius per pixel, in pixel footprints at its 
 # examples). Aimed paths: 2 (chosen on the examples at equal time, 2-8 s: caustic RMSE 0.91 of
 # unaimed emission at 4 paths, against 0.94 at 1 and 0.98 at 4; docs/benchmarks.md). From a
 # light inside the sphere nothing is aimed, and 4 stays (tuned before: benchmarks/
-# auto_tuning.py, best on the ring, tied on glass egg, pool1 and dragon).
+# auto_tuning.py, best on the ring, tied on glass egg, pool1 and dragon). On the unseen scenes
+# these counts are within 5 % of each scene's best of 1, 2, 4, 8 (benchmarks/paths_per_pass.py).
 PHOTONS_PER_PIXEL, AIMED_PHOTONS_PER_PIXEL = 4.0, 2.0
 GRID_RADII = 4.0  # first radius at later diffuse vertices, in median first-pass pixel radii
 # Extra camera samples per pass of the light seen in mirrors and glass, per pixel that sees
