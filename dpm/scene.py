@@ -146,6 +146,17 @@ class Scene:
         caustic, and paths need no specular chains)."""
         return bool(np.all(self.materials.kind[np.unique(self.material)] == DIFFUSE))
 
+    @cached_property
+    def specular_sphere(self) -> np.ndarray:
+        """(4,) float64 centre and radius of a sphere holding every mirror and glass triangle
+        (radius −1: none). Cached: guided photon emission reads it every pass."""
+        specular = self.materials.kind[self.material] != DIFFUSE
+        if not specular.any():
+            return np.array([0.0, 0.0, 0.0, -1.0])
+        v = self.triangles[specular].reshape(-1, 3).astype(np.float64)
+        centre = (v.min(axis=0) + v.max(axis=0)) / 2
+        return np.append(centre, np.sqrt(((v - centre) ** 2).sum(axis=1).max()))
+
     @property
     def extent(self) -> float:
         """Length of the bounding box diagonal (scene units)."""

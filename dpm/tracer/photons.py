@@ -243,15 +243,12 @@ def trace_photons(
 
 
 def specular_bounding_sphere(scene: Scene) -> np.ndarray:
-    """(4,) float64 centre and radius of a sphere holding every specular triangle (−1: none)."""
-    specular = scene.materials.kind[scene.material] != DIFFUSE
-    if not specular.any():
-        return np.array([0.0, 0.0, 0.0, -1.0])
-    v = scene.triangles[specular].reshape(-1, 3).astype(np.float64)
-    lo, hi = v.min(axis=0), v.max(axis=0)
-    centre = (lo + hi) / 2
-    radius = np.sqrt(((v - centre) ** 2).sum(axis=1).max())
-    return np.append(centre, radius * (1 + 1e-6) + spawn_offset(scene))
+    """(4,) float64 centre and radius of a sphere holding every specular triangle (−1: none),
+    `Scene.specular_sphere` grown by rounding's margin and the spawn offset."""
+    sphere = scene.specular_sphere
+    if sphere[3] < 0:
+        return sphere.copy()
+    return np.append(sphere[:3], sphere[3] * (1 + 1e-6) + spawn_offset(scene))
 
 
 def aimed_share(scene: Scene) -> float:
