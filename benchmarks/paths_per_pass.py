@@ -40,7 +40,7 @@ import numpy as np
 from caustic_references import CONTROLS, EXAMPLES, SCALED, SETS, load_reference, size
 from equal_time import OUT as EXAMPLE_REFERENCES
 
-from common import RESULTS, cpu
+from common import RESULTS, cpu, geomean
 from dpm import load_scene
 from dpm.io import read_exr
 from dpm.methods import auto
@@ -123,23 +123,22 @@ def fit_noise(rows: list[dict]) -> tuple[float, float]:
     return float(a), float(b)
 
 
-def geomean(values: list[float]) -> float:
-    """Geometric mean of positive numbers."""
-    return float(np.exp(np.mean(np.log(values))))
+def mean_errors(rows: list[dict]) -> dict[tuple[str, float], dict[float, float]]:
+    """{(scene, budget): {count: RMSE, the mean over the seeds}}, in the rows' order."""
+    err: dict = {}
+    for x in rows:
+        err.setdefault((x["scene"], x["budget"]), {}).setdefault(x["ppp"], []).append(x["rmse"])
+    return {key: {m: float(np.mean(e)) for m, e in by_m.items()} for key, by_m in err.items()}
 
 
 def oracle_ratios(rows: list[dict]) -> tuple[dict[float, float], float, float]:
     """Each count's RMSE over the best count's of its scene and budget (mean over seeds), as a
     geometric mean over the (scene, budget) pairs, and the same for the count `auto` takes
     (the row's "shipped", where it is one of the counts run) with its worst ratio."""
-    err: dict = {}
-    for x in rows:
-        err.setdefault((x["scene"], x["budget"]), {}).setdefault(x["ppp"], []).append(x["rmse"])
     ratios: dict[float, list[float]] = {}
     shipped = {x["scene"]: x.get("shipped") for x in rows}
     own = []
-    for (name, _), by_m in err.items():
-        mean = {m: float(np.mean(e)) for m, e in by_m.items()}
+    for (name, _), mean in mean_errors(rows).items():
         best = min(mean.values())
         for m, e in mean.items():
             ratios.setdefault(m, []).append(e / best)
@@ -157,6 +156,7 @@ def summary(rows: list[dict]) -> list[str]:
     lines = ["over the best count per scene and budget: "
              + " ".join(f"{m:g}: {r:.3f}" for m, r in gm.items())
              + f"; auto's count {own:.3f} (worst {worst:.2f})"]  # fmt: skip
+    errors = mean_errors(rows)
     for name in dict.fromkeys(x["scene"] for x in rows):
         mine = [x for x in rows if x["scene"] == name]
         at2 = [x for x in mine if x["ppp"] == 2] or mine
@@ -164,11 +164,7 @@ def summary(rows: list[dict]) -> list[str]:
         p = np.mean([x["photon_s"] / (x["passes"] * x["ppp"] * x["pixels"]) for x in at2])
         parts = []
         for budget in dict.fromkeys(x["budget"] for x in mine):
-            err = {}
-            for x in mine:
-                if x["budget"] == budget:
-                    err.setdefault(x["ppp"], []).append(x["rmse"])
-            mean = {m: float(np.mean(e)) for m, e in err.items()}
+            mean = errors[name, budget]
             best = min(mean, key=mean.get)
             ratios = " ".join(f"{m:g}:{mean[m] / mean[best]:.2f}" for m in sorted(mean))
             a, b = fit_noise([x for x in mine if x["budget"] == budget])
