@@ -14,8 +14,10 @@ its whole `render` less the BVH build (Mitsuba builds its BVH when loading the s
 untimed); Mitsuba's is `mi.render` up to an evaluated image in NumPy. Image means are compared
 as a sanity check (the transport is validated against Mitsuba by tests/test_mitsuba.py).
 
-Mitsuba's LLVM backend needs libLLVM >= 15; on AVX-512 machines LLVM 15 fails to compile
-Mitsuba's kernels ("Cannot select: fminimum"), so install a newer one (Debian: libllvm19).
+Mitsuba's LLVM backend needs libLLVM >= 15; LLVM 15 fails to compile Mitsuba's kernels
+("Cannot select: fminimum", on AVX-512 machines and on an AVX2-only Zen 3 alike), so install
+a newer one (Debian: libllvm19): the newest libLLVM found is handed to Dr.Jit
+(`unseen_references.llvm_library`; DRJIT_LIBLLVM_PATH, if set, wins).
 `--set unseen` measures the unseen-scene set (`scenes/make_unseen.py`, built when missing)
 instead of the examples; its geometric mean is printed below the table.
 Writes benchmarks/results/path_speed.md (path_speed_unseen.md for the unseen set, or --out)
@@ -26,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import os
 import sys
 import tempfile
 from collections.abc import Callable
@@ -44,6 +47,7 @@ from dpm.validation.mitsuba import mitsuba_scene
 
 sys.path.insert(0, str(Path(__file__).parent / "scenes"))
 from make_unseen import unseen_scenes  # noqa: E402
+from unseen_references import llvm_library  # noqa: E402
 
 VARIANT = "llvm_ad_rgb"
 
@@ -62,6 +66,9 @@ def dpm_renderer(scene: Scene, camera: Camera, spp: int) -> Callable[[int], tupl
 
 def mitsuba_renderer(scene: Scene, camera: Camera, spp: int) -> Callable[[int], tuple]:
     """seed -> (image, seconds) of Mitsuba 3 `path` on VARIANT, evaluation forced."""
+    library = llvm_library()
+    if library:  # read when Dr.Jit starts its LLVM backend
+        os.environ["DRJIT_LIBLLVM_PATH"] = library
     import drjit as dr
     import mitsuba as mi
 

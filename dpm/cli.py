@@ -26,7 +26,7 @@ if TYPE_CHECKING:
     from dpm.options import RenderOptions
 
 # the README's first render on 2 idle cores: 83 s (Intel Xeon), 155 s (AMD Zen 4); cold_start.py
-FIRST_RUN = "one and a half to three minutes on 2 cores"
+FIRST_RUN = "one and a half to five minutes on 2 cores"  # 77-272 s measured, by host
 
 
 class _Parser(argparse.ArgumentParser):
