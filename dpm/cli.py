@@ -25,8 +25,9 @@ from dpm.options import COMPONENTS, cli_fields, default_text, flag
 if TYPE_CHECKING:
     from dpm.options import RenderOptions
 
-# the README's first render on 2 idle cores: 83 s (Intel Xeon), 155 s (AMD Zen 4); cold_start.py
-FIRST_RUN = "one and a half to five minutes on 2 cores"  # 77-272 s measured, by host
+# the README's first render on 2 idle cores: 77-88 s (AMD Zen 5), 83 s (Intel Xeon), 97-155 s
+# (Zen 4), 262-272 s (Zen 3, AVX2 only); cold_start.py
+FIRST_RUN = "one and a half to five minutes on 2 cores"
 
 
 class _Parser(argparse.ArgumentParser):
