@@ -4,8 +4,10 @@ The single-ray functions (`closest_hit`, `any_hit`) are what other Numba kernels
 their own `prange` loops; the `*_batch` kernels run them over arrays of rays. They are
 compiled once, not inlined into each caller: inlined, the traversal loop was copied into
 every call site (camera chains call it five times), and the first render compiled for three
-minutes instead of about one and a half, for no measurable speed (a call passes only the BVH's
-arrays, the ray and the stack).
+minutes instead of about one and a half, for no measurable speed. What they pass is kept
+small: the BVH's arrays and the stack go as addresses and sizes (`_bvh_address`), not as
+Numba's array structs, whose 45 words were pushed on the stack at every call (closest hits
++9-26 % a thread on Zen 3).
 
 Triangle tests are float64 on float32 geometry, with no fastmath: watertightness needs exact
 IEEE. Box tests are float32 and conservative (`box_constants`): a box the ray enters is never
@@ -24,7 +26,7 @@ from numba.core import cgutils, types
 from numba.extending import intrinsic
 
 from dpm.scene import Scene
-from dpm.tracer.bvh import LEAF_BITS, MAX_LEAF, REFS, WIDTH
+from dpm.tracer.bvh import LEAF_BITS, MAX_LEAF, RECORD, REFS, WIDTH, BVHArrays
 
 # A leaf's triangles take one float64 lane each: 4 lanes fill one 256-bit register, which
 # Zen 4 runs at full rate, where 8 lanes (512 bits) take two passes; leaves hold 2-3 triangles
@@ -489,12 +491,94 @@ def _entry(stack, c):
     return stack[stack.shape[0] - WIDTH // 2 + (c >> 1), c & 1]
 
 
-@nb.njit(cache=True, _nrt=False, error_model="numpy")
+@intrinsic
+def _address(typingctx, array):
+    """The address of an array's first element, as an int64."""
+
+    def codegen(context, builder, sig, args):
+        data = context.make_array(sig.args[0])(context, builder, args[0]).data
+        return builder.ptrtoint(data, ir.IntType(64))
+
+    return types.int64(array), codegen
+
+
+def _array_at(dtype, ndim):
+    """An intrinsic (address, *shape) -> C-contiguous `ndim`-D array of `dtype` at the int64
+    address (no owner: the caller keeps the memory alive)."""
+
+    @intrinsic
+    def view(typingctx, address, shape):
+        array_type = types.Array(dtype, ndim, "C")
+
+        def codegen(context, builder, sig, args):
+            array = context.make_array(array_type)(context, builder)
+            item = context.get_abi_sizeof(context.get_data_type(dtype))
+            dims = cgutils.unpack_tuple(builder, args[1], ndim)
+            dims = [context.cast(builder, x, t, types.intp) for x, t in zip(dims, sig.args[1], strict=True)]
+            strides, step = [], ir.Constant(ir.IntType(64), item)
+            for x in reversed(dims):
+                strides.insert(0, step)
+                step = builder.mul(step, x)
+            data = builder.inttoptr(args[0], context.get_data_type(dtype).as_pointer())
+            context.populate_array(array, data=data, shape=dims, strides=strides,
+                                   itemsize=ir.Constant(ir.IntType(64), item), meminfo=None)  # fmt: skip
+            return array._getvalue()
+
+        return array_type(address, shape), codegen
+
+    return view
+
+
+_float32_2d, _int32_2d, _int32_1d, _int64_2d = (
+    _array_at(types.float32, 2), _array_at(types.int32, 2), _array_at(types.int32, 1),
+    _array_at(types.int64, 2),
+)  # fmt: skip
+
+
+@nb.njit(cache=True, inline="always")
+def _bvh_at(nodes, n_nodes, planes, n_planes, order, n_tri):
+    """The BVHArrays at the addresses `_bvh_address` gave (tri_verts left empty: traversal
+    does not read it)."""
+    return BVHArrays(
+        _float32_2d(nodes, (n_nodes, RECORD)),
+        _int32_2d(nodes, (n_nodes, RECORD)),
+        _float32_2d(planes, (0, 9)),
+        _int32_1d(order, (n_tri,)),
+        _float32_2d(planes, (9, n_planes)),
+    )
+
+
+@nb.njit(cache=True, inline="always")
+def _bvh_address(bvh):
+    """A BVHArrays as six integers (addresses and sizes) for `_bvh_at`.
+
+    A call that is not inlined passes each array as its whole Numba struct (9 words for a 2-D
+    array: data, shape, strides, meminfo, ...), and a BVHArrays is five of them: 43 words
+    pushed on the stack, about 18 ns a call on Zen 3, where a ray that misses everything
+    costs 60 in all. Six words go in registers.
+    """
+    return (_address(bvh.bounds), bvh.bounds.shape[0], _address(bvh.tri_planes),
+            bvh.tri_planes.shape[1], _address(bvh.tri_index), bvh.tri_index.shape[0])  # fmt: skip
+
+
+@nb.njit(cache=True, inline="always")
 def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     """(t, scene triangle index) of the nearest hit in (0, tmax), or (inf, -1).
 
-    `bvh` is a BVHArrays; `stack` is scratch from `new_stack`.
+    `bvh` is a BVHArrays; `stack` is scratch from `new_stack`. Inlined: it passes the arrays
+    to `_closest_hit` (not inlined) as addresses.
     """
+    return _closest_hit(
+        *_bvh_address(bvh), ox, oy, oz, dx, dy, dz, tmax, _address(stack), stack.shape[0]
+    )
+
+
+@nb.njit(cache=True, _nrt=False, error_model="numpy")
+def _closest_hit(nodes, n_nodes, planes, n_planes, order, n_tri, ox, oy, oz, dx, dy, dz, tmax,
+                 stack_at, stack_rows):  # fmt: skip
+    """`closest_hit` on the arrays at the addresses `_bvh_address` and `_address` give."""
+    bvh = _bvh_at(nodes, n_nodes, planes, n_planes, order, n_tri)
+    stack = _int64_2d(stack_at, (stack_rows, 2))
     ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
     kz = _dominant_axis(dx, dy, dz)
     kx, ky, kz, sx, sy, sz = ray_setup_inverse(dx, dy, dz, kz, pick(kz, ix, iy, iz))
@@ -588,9 +672,21 @@ def closest_below(bvh, start, ray, planes_at, k, o, s, best_t, best, stack):
     return best_t, best
 
 
-@nb.njit(cache=True, _nrt=False, error_model="numpy")
+@nb.njit(cache=True, inline="always")
 def any_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
-    """True if the ray hits any triangle at a distance in (0, tmax)."""
+    """True if the ray hits any triangle at a distance in (0, tmax). Inlined, as
+    `closest_hit`: the work is in `_any_hit`."""
+    return _any_hit(
+        *_bvh_address(bvh), ox, oy, oz, dx, dy, dz, tmax, _address(stack), stack.shape[0]
+    )
+
+
+@nb.njit(cache=True, _nrt=False, error_model="numpy")
+def _any_hit(nodes, n_nodes, planes, n_planes, order, n_tri, ox, oy, oz, dx, dy, dz, tmax,
+             stack_at, stack_rows):  # fmt: skip
+    """`any_hit` on the arrays at the addresses `_bvh_address` and `_address` give."""
+    bvh = _bvh_at(nodes, n_nodes, planes, n_planes, order, n_tri)
+    stack = _int64_2d(stack_at, (stack_rows, 2))
     ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
     kz = _dominant_axis(dx, dy, dz)
     kx, ky, kz, sx, sy, sz = ray_setup_inverse(dx, dy, dz, kz, pick(kz, ix, iy, iz))
