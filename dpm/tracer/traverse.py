@@ -514,14 +514,19 @@ def _array_at(dtype, ndim):
             array = context.make_array(array_type)(context, builder)
             item = context.get_abi_sizeof(context.get_data_type(dtype))
             dims = cgutils.unpack_tuple(builder, args[1], ndim)
-            dims = [context.cast(builder, x, t, types.intp) for x, t in zip(dims, sig.args[1], strict=True)]
+            dims = [
+                context.cast(builder, x, t, types.intp)
+                for x, t in zip(dims, sig.args[1], strict=True)
+            ]
             strides, step = [], ir.Constant(ir.IntType(64), item)
             for x in reversed(dims):
                 strides.insert(0, step)
                 step = builder.mul(step, x)
             data = builder.inttoptr(args[0], context.get_data_type(dtype).as_pointer())
-            context.populate_array(array, data=data, shape=dims, strides=strides,
-                                   itemsize=ir.Constant(ir.IntType(64), item), meminfo=None)  # fmt: skip
+            size = ir.Constant(ir.IntType(64), item)
+            context.populate_array(
+                array, data=data, shape=dims, strides=strides, itemsize=size, meminfo=None
+            )
             return array._getvalue()
 
         return array_type(address, shape), codegen
