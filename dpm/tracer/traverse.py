@@ -26,6 +26,7 @@ from numba.core import cgutils, types
 from numba.extending import intrinsic
 
 from dpm.scene import Scene
+from dpm.tracer.addresses import address, array_at
 from dpm.tracer.bvh import LEAF_BITS, MAX_LEAF, RECORD, REFS, WIDTH, BVHArrays
 
 # A leaf's triangles take one float64 lane each: 4 lanes fill one 256-bit register, which
@@ -491,52 +492,9 @@ def _entry(stack, c):
     return stack[stack.shape[0] - WIDTH // 2 + (c >> 1), c & 1]
 
 
-@intrinsic
-def _address(typingctx, array):
-    """The address of an array's first element, as an int64."""
-
-    def codegen(context, builder, sig, args):
-        data = context.make_array(sig.args[0])(context, builder, args[0]).data
-        return builder.ptrtoint(data, ir.IntType(64))
-
-    return types.int64(array), codegen
-
-
-def _array_at(dtype, ndim):
-    """An intrinsic (address, *shape) -> C-contiguous `ndim`-D array of `dtype` at the int64
-    address (no owner: the caller keeps the memory alive)."""
-
-    @intrinsic
-    def view(typingctx, address, shape):
-        array_type = types.Array(dtype, ndim, "C")
-
-        def codegen(context, builder, sig, args):
-            array = context.make_array(array_type)(context, builder)
-            item = context.get_abi_sizeof(context.get_data_type(dtype))
-            dims = cgutils.unpack_tuple(builder, args[1], ndim)
-            dims = [
-                context.cast(builder, x, t, types.intp)
-                for x, t in zip(dims, sig.args[1], strict=True)
-            ]
-            strides, step = [], ir.Constant(ir.IntType(64), item)
-            for x in reversed(dims):
-                strides.insert(0, step)
-                step = builder.mul(step, x)
-            data = builder.inttoptr(args[0], context.get_data_type(dtype).as_pointer())
-            size = ir.Constant(ir.IntType(64), item)
-            context.populate_array(
-                array, data=data, shape=dims, strides=strides, itemsize=size, meminfo=None
-            )
-            return array._getvalue()
-
-        return array_type(address, shape), codegen
-
-    return view
-
-
 _float32_2d, _int32_2d, _int32_1d, _int64_2d = (
-    _array_at(types.float32, 2), _array_at(types.int32, 2), _array_at(types.int32, 1),
-    _array_at(types.int64, 2),
+    array_at(types.float32, 2), array_at(types.int32, 2), array_at(types.int32, 1),
+    array_at(types.int64, 2),
 )  # fmt: skip
 
 
@@ -555,15 +513,11 @@ def _bvh_at(nodes, n_nodes, planes, n_planes, order, n_tri):
 
 @nb.njit(cache=True, inline="always")
 def _bvh_address(bvh):
-    """A BVHArrays as six integers (addresses and sizes) for `_bvh_at`.
-
-    A call that is not inlined passes each array as its whole Numba struct (9 words for a 2-D
-    array: data, shape, strides, meminfo, ...), and a BVHArrays is five of them: 43 words
-    pushed on the stack, about 18 ns a call on Zen 3, where a ray that misses everything
-    costs 60 in all. Six words go in registers.
-    """
-    return (_address(bvh.bounds), bvh.bounds.shape[0], _address(bvh.tri_planes),
-            bvh.tri_planes.shape[1], _address(bvh.tri_index), bvh.tri_index.shape[0])  # fmt: skip
+    """A BVHArrays as six integers (addresses and sizes) for `_bvh_at`: fewer than
+    `dpm.tracer.addresses`' general form (the boxes and references share their memory, and
+    the vertices are not read), as traversal is called most."""
+    return (address(bvh.bounds), bvh.bounds.shape[0], address(bvh.tri_planes),
+            bvh.tri_planes.shape[1], address(bvh.tri_index), bvh.tri_index.shape[0])  # fmt: skip
 
 
 @nb.njit(cache=True, inline="always")
@@ -574,14 +528,14 @@ def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     to `_closest_hit` (not inlined) as addresses.
     """
     return _closest_hit(
-        *_bvh_address(bvh), ox, oy, oz, dx, dy, dz, tmax, _address(stack), stack.shape[0]
+        *_bvh_address(bvh), ox, oy, oz, dx, dy, dz, tmax, address(stack), stack.shape[0]
     )
 
 
 @nb.njit(cache=True, _nrt=False, error_model="numpy")
 def _closest_hit(nodes, n_nodes, planes, n_planes, order, n_tri, ox, oy, oz, dx, dy, dz, tmax,
                  stack_at, stack_rows):  # fmt: skip
-    """`closest_hit` on the arrays at the addresses `_bvh_address` and `_address` give."""
+    """`closest_hit` on the arrays at the addresses `_bvh_address` and `address` give."""
     bvh = _bvh_at(nodes, n_nodes, planes, n_planes, order, n_tri)
     stack = _int64_2d(stack_at, (stack_rows, 2))
     ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
@@ -682,14 +636,14 @@ def any_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     """True if the ray hits any triangle at a distance in (0, tmax). Inlined, as
     `closest_hit`: the work is in `_any_hit`."""
     return _any_hit(
-        *_bvh_address(bvh), ox, oy, oz, dx, dy, dz, tmax, _address(stack), stack.shape[0]
+        *_bvh_address(bvh), ox, oy, oz, dx, dy, dz, tmax, address(stack), stack.shape[0]
     )
 
 
 @nb.njit(cache=True, _nrt=False, error_model="numpy")
 def _any_hit(nodes, n_nodes, planes, n_planes, order, n_tri, ox, oy, oz, dx, dy, dz, tmax,
              stack_at, stack_rows):  # fmt: skip
-    """`any_hit` on the arrays at the addresses `_bvh_address` and `_address` give."""
+    """`any_hit` on the arrays at the addresses `_bvh_address` and `address` give."""
     bvh = _bvh_at(nodes, n_nodes, planes, n_planes, order, n_tri)
     stack = _int64_2d(stack_at, (stack_rows, 2))
     ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz

@@ -21,6 +21,7 @@ import numpy as np
 from dpm.camera import Camera
 from dpm.filters import dilate3
 from dpm.scene import DIELECTRIC, DIFFUSE, Scene
+from dpm.tracer.addresses import address, bvh_at, bvh_words, scene_at, scene_words, stack_at
 from dpm.tracer.bsdf import (
     fresnel_dielectric,
     reflect,
@@ -222,7 +223,21 @@ def chain_from(bvh, sc, dx, dy, dz, hit, stream, seed, eps, stack):
     return False, z, z, z, z, z, z, z, z, z, z, z, z, er, eg, eb
 
 
-camera_chain = nb.njit(cache=True, _nrt=False, error_model="numpy")(chain_from.py_func)
+@nb.njit(cache=True, inline="always")
+def camera_chain(bvh, sc, dx, dy, dz, hit, stream, seed, eps, stack):
+    """`chain_from`, called (`_camera_chain`) with its arrays passed by address."""
+    return _camera_chain(
+        bvh_words(bvh), scene_words(sc), dx, dy, dz, hit, stream, seed, eps,
+        address(stack), stack.shape[0],
+    )  # fmt: skip
+
+
+@nb.njit(cache=True, _nrt=False, error_model="numpy")
+def _camera_chain(bvh, sc, dx, dy, dz, hit, stream, seed, eps, stack, rows):
+    """`camera_chain` on the `dpm.tracer.addresses` words of its arrays."""
+    return chain_from(
+        bvh_at(bvh), scene_at(sc), dx, dy, dz, hit, stream, seed, eps, stack_at(stack, (rows, 2))
+    )
 
 
 # Compiled without Numba's reference counting, as `dpm.tracer.path.shade_one` (see there).
