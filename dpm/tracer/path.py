@@ -18,6 +18,7 @@ import numpy as np
 
 from dpm.camera import Camera
 from dpm.scene import DIFFUSE, Scene
+from dpm.tracer.addresses import address, bvh_at, bvh_words, scene_at, scene_words, stack_at
 from dpm.tracer.bsdf import scatter_specular, specular_survival
 from dpm.tracer.bvh import BVH
 from dpm.tracer.lights import (
@@ -74,6 +75,19 @@ def _unoccluded(bvh, ax, ay, az, bx, by, bz, stack):
     return not any_hit(bvh, ax, ay, az, dx * inv, dy * inv, dz * inv, length, stack)
 
 
+@nb.njit(cache=True, inline="always")
+def shade_one(
+    bvh, sc, seed, stream, pseq, index, eps, caustics, grid, stack, px, py, pz, nx, ny, nz,
+    ar, ag, ab,
+):  # fmt: skip
+    """RGB radiance reflected by the diffuse point p (normal n towards the viewer, albedo a).
+    Called (`_shade_one`) with the BVH, the scene and the stack passed by address."""
+    return _shade_one(
+        bvh_words(bvh), scene_words(sc), seed, stream, pseq, index, eps, caustics, grid,
+        address(stack), stack.shape[0], px, py, pz, nx, ny, nz, ar, ag, ab,
+    )  # fmt: skip
+
+
 # Compiled without Numba's reference counting (`_nrt=False`; it allocates nothing). With it,
 # every inlined call that takes the scene's or the BVH's tuple of arrays (next_surface, any_hit,
 # scatter_specular, ...) increments and decrements each array's reference count: some forty
@@ -81,14 +95,14 @@ def _unoccluded(bvh, ax, ay, az, bx, by, bz, stack):
 # shading time on two cores. Functions inlined into it inherit the setting; the traversal
 # functions it calls (`closest_hit`, `any_hit`) are compiled with it as well.
 @nb.njit(cache=True, _nrt=False, error_model="numpy")
-def shade_one(
-    bvh, sc, seed, stream, pseq, index, eps, caustics, grid, stack, px, py, pz, nx, ny, nz,
-    ar, ag, ab,
+def _shade_one(
+    bvh, sc, seed, stream, pseq, index, eps, caustics, grid, stack, rows, px, py, pz, nx, ny,
+    nz, ar, ag, ab,
 ):  # fmt: skip
-    """RGB radiance reflected by the diffuse point p (normal n towards the viewer, albedo a)."""
+    """`shade_one` on the `dpm.tracer.addresses` words of its BVH, scene and stack."""
     return shade_path(
-        bvh, sc, seed, stream, pseq, index, eps, caustics, grid, stack, px, py, pz, nx, ny, nz,
-        ar, ag, ab,
+        bvh_at(bvh), scene_at(sc), seed, stream, pseq, index, eps, caustics, grid,
+        stack_at(stack, (rows, 2)), px, py, pz, nx, ny, nz, ar, ag, ab,
     )  # fmt: skip
 
 

@@ -240,14 +240,29 @@ def _camera_chain(bvh, sc, dx, dy, dz, hit, stream, seed, eps, stack, rows):
     )
 
 
-# Compiled without Numba's reference counting, as `dpm.tracer.path.shade_one` (see there).
-@nb.njit(cache=True, _nrt=False, error_model="numpy")
+@nb.njit(cache=True, inline="always")
 def visible_pixel(
     bvh, sc, cam, width, height, pix, row, spp, seed, sequence, first, eps, stack,
     position, normal, albedo, throughput, emitted, hit, pixel, sample,
 ):  # fmt: skip
     """Fill output rows row..row+spp-1 with the samples of pixel pix (row-major index); with
-    sequence ≥ 0, sample s lies at point first + s of the pixel's stratified sequence."""
+    sequence ≥ 0, sample s lies at point first + s of the pixel's stratified sequence.
+    Called (`_visible_pixel`) with the BVH, the scene and the stack passed by address."""
+    _visible_pixel(
+        bvh_words(bvh), scene_words(sc), cam, width, height, pix, row, spp, seed, sequence,
+        first, eps, address(stack), stack.shape[0], position, normal, albedo, throughput,
+        emitted, hit, pixel, sample,
+    )  # fmt: skip
+
+
+# Compiled without Numba's reference counting, as `dpm.tracer.path.shade_one` (see there).
+@nb.njit(cache=True, _nrt=False, error_model="numpy")
+def _visible_pixel(
+    bvh, sc, cam, width, height, pix, row, spp, seed, sequence, first, eps, stack, rows,
+    position, normal, albedo, throughput, emitted, hit, pixel, sample,
+):  # fmt: skip
+    """`visible_pixel` on the `dpm.tracer.addresses` words of its BVH, scene and stack."""
+    bvh, sc, stack = bvh_at(bvh), scene_at(sc), stack_at(stack, (rows, 2))
     y, x = pix // width, pix % width
     pseq = pixel_sequence(max(sequence, 0), pix)
     for s in range(spp):
@@ -309,10 +324,21 @@ def trace_visible_points(
 
 # A function of its own, called once per pixel, so the `prange` kernel below stays small:
 # Numba's parallel passes over a kernel with the camera chain inlined took 20 s to compile.
-@nb.njit(cache=True, _nrt=False, error_model="numpy")
+@nb.njit(cache=True, inline="always")
 def emitted_pixel(bvh, sc, cam, width, height, pix, count, first, seed, eps, stack):
     """(r, g, b, squared luminance) sums over samples first … first + count - 1 of pixel pix's
-    scrambled Sobol sequence: the radiance of lights seen along their specular chains."""
+    scrambled Sobol sequence: the radiance of lights seen along their specular chains.
+    Called (`_emitted_pixel`) with the BVH, the scene and the stack passed by address."""
+    return _emitted_pixel(
+        bvh_words(bvh), scene_words(sc), cam, width, height, pix, count, first, seed, eps,
+        address(stack), stack.shape[0],
+    )  # fmt: skip
+
+
+@nb.njit(cache=True, _nrt=False, error_model="numpy")
+def _emitted_pixel(bvh, sc, cam, width, height, pix, count, first, seed, eps, stack, rows):
+    """`emitted_pixel` on the `dpm.tracer.addresses` words of its BVH, scene and stack."""
+    bvh, sc, stack = bvh_at(bvh), scene_at(sc), stack_at(stack, (rows, 2))
     y, x = pix // width, pix % width
     # the pixel's scramble (stream pix, dimensions its samples' streams never use)
     shift_x = np.int64(uniform(seed, pix, 0) * 4294967296.0)
