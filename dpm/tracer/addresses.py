@@ -72,21 +72,40 @@ def array_at(dtype: types.Type, ndim: int):
     return view
 
 
-def _layout(bundle_type: types.BaseTuple) -> list[types.Array]:
-    """The member array types of a NamedTuple type, each C-contiguous."""
-    members = list(bundle_type.types)
-    for a in members:
-        if not isinstance(a, types.Array) or a.layout != "C":
-            raise TypingError(f"passed by address: {a} is not a C-contiguous array")
-    return members
+def _layout(bundle_type: types.Type) -> list[types.Array]:
+    """The arrays of a (nested) tuple type, depth first, each C-contiguous."""
+    if isinstance(bundle_type, types.BaseTuple):
+        return [a for t in bundle_type.types for a in _layout(t)]
+    if not isinstance(bundle_type, types.Array) or bundle_type.layout != "C":
+        raise TypingError(f"passed by address: {bundle_type} is not a C-contiguous array")
+    return [bundle_type]
+
+
+def _flatten(builder, value, value_type) -> list:
+    """The LLVM values of the arrays of a (nested) tuple, in `_layout`'s order."""
+    if isinstance(value_type, types.BaseTuple):
+        return [
+            x
+            for i, t in enumerate(value_type.types)
+            for x in _flatten(builder, builder.extract_value(value, i), t)
+        ]
+    return [value]
+
+
+def _rebuild(context, builder, value_type, arrays: list):
+    """A (nested) tuple of `value_type` from its arrays (consumed from the front)."""
+    if isinstance(value_type, types.BaseTuple):
+        parts = [_rebuild(context, builder, t, arrays) for t in value_type.types]
+        return context.make_tuple(builder, value_type, parts)
+    return arrays.pop(0)
 
 
 def by_address(example: tuple):
-    """Two intrinsics for NamedTuples typed as `example` (a bundle of arrays of the dtypes and
-    dimensions callers pass; its values are not used): `to_words(bundle)`, each array's
-    address then its shape as one int64 tuple, and `from_words(words)`, the bundle again,
-    its arrays viewing the same memory. A bundle of other dtypes or dimensions, or not
-    C-contiguous, fails to compile."""
+    """Two intrinsics for (nested, named or not) tuples of arrays typed as `example` (of the
+    dtypes and dimensions callers pass; its values are not used): `to_words(bundle)`, each
+    array's address then its shape as one int64 tuple, and `from_words(words)`, the bundle
+    again, its arrays viewing the same memory. A bundle of other dtypes or dimensions, or
+    not C-contiguous, fails to compile."""
     bundle_type = nb.typeof(example)
     members = _layout(bundle_type)
     n = sum(1 + a.ndim for a in members)
@@ -100,8 +119,8 @@ def by_address(example: tuple):
 
         def codegen(context, builder, sig, args):
             out = []
-            for i, a in enumerate(given):
-                array = context.make_array(a)(context, builder, builder.extract_value(args[0], i))
+            for a, value in zip(given, _flatten(builder, args[0], sig.args[0]), strict=True):
+                array = context.make_array(a)(context, builder, value)
                 out.append(builder.ptrtoint(array.data, ir.IntType(64)))
                 out.extend(cgutils.unpack_tuple(builder, array.shape, a.ndim))
             return context.make_tuple(builder, words_type, out)
@@ -114,11 +133,11 @@ def by_address(example: tuple):
             raise TypingError(f"expected the {n} words of {bundle_type}, got {packed}")
 
         def codegen(context, builder, sig, args):
-            flat, out, k = cgutils.unpack_tuple(builder, args[0], n), [], 0
+            flat, arrays, k = cgutils.unpack_tuple(builder, args[0], n), [], 0
             for a in members:
-                out.append(_view(context, builder, a, flat[k], flat[k + 1 : k + 1 + a.ndim]))
+                arrays.append(_view(context, builder, a, flat[k], flat[k + 1 : k + 1 + a.ndim]))
                 k += 1 + a.ndim
-            return context.make_tuple(builder, bundle_type, out)
+            return _rebuild(context, builder, bundle_type, arrays)
 
         return bundle_type(packed), codegen
 

@@ -24,6 +24,7 @@ from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
+from dpm.tracer.addresses import by_address
 from dpm.tracer.bvh import LEAF_BITS, REFS, WIDTH
 from dpm.tracer.traverse import (
     _COUNT,
@@ -238,6 +239,19 @@ def new_packet(depth):
     io = (np.full(LANES, np.inf), np.empty(LANES), np.empty(LANES, np.int64),
           np.empty(LANES, np.int64))  # fmt: skip
     return f64, i64, rc, far, stack, io
+
+
+# `new_packet`'s types, for passing packets by address (`dpm.tracer.addresses`)
+packet_words, packet_at = by_address(
+    (
+        tuple(np.zeros(0) for _ in range(10)),
+        tuple(np.zeros(0, np.int64) for _ in range(5)),
+        np.zeros(0, np.float32),
+        np.zeros(0, np.float32),
+        np.zeros((0, 0), np.int64),
+        (np.zeros(0), np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64)),
+    )
+)
 
 
 @nb.njit(cache=True, inline="always")

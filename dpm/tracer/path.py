@@ -26,7 +26,7 @@ from dpm.tracer.lights import (
     sample_light_point,
     sample_light_stratified,
 )
-from dpm.tracer.packet import LANES, closest_packet, new_packet, put_ray
+from dpm.tracer.packet import LANES, closest_packet, new_packet, packet_at, packet_words, put_ray
 from dpm.tracer.photon_grid import PhotonGrid, grid_irradiance
 from dpm.tracer.sampling import pixel_sequence, sample_cosine, stratified2, uniform
 from dpm.tracer.surface import albedo_at, next_surface, surface_at
@@ -279,10 +279,24 @@ def shade(
     return out, int(bad)
 
 
-@nb.njit(cache=True, _nrt=False, error_model="numpy")
+@nb.njit(cache=True, inline="always")
 def path_pixel(
     bvh, sc, cam, width, height, pix, first, spp, stride, seed, sequence, qfirst, eps,
     caustics, emission, grid, stack, packet,
+):  # fmt: skip
+    """`_path_pixel`, called with the BVH, the scene, the stack and the packet passed by
+    address (`dpm.tracer.addresses`: as Numba structs they were some 360 words a call)."""
+    return _path_pixel(
+        bvh_words(bvh), scene_words(sc), cam, width, height, pix, first, spp, stride, seed,
+        sequence, qfirst, eps, caustics, emission, grid, address(stack), stack.shape[0],
+        packet_words(packet),
+    )  # fmt: skip
+
+
+@nb.njit(cache=True, _nrt=False, error_model="numpy")
+def _path_pixel(
+    bvh, sc, cam, width, height, pix, first, spp, stride, seed, sequence, qfirst, eps,
+    caustics, emission, grid, stack, rows, packet,
 ):  # fmt: skip
     """Sums over spp camera paths of pixel pix (row-major index), random streams pix·stride
     + first … first+spp-1: (radiance r, g, b, denoiser albedo r, g, b and normal x, y, z,
@@ -293,6 +307,8 @@ def path_pixel(
 
     The camera rays of up to LANES paths at a time are traced as one packet (`packet`, from
     `new_packet`): a pixel's rays enter the same nodes. The paths then go on one by one."""
+    bvh, sc, packet = bvh_at(bvh), scene_at(sc), packet_at(packet)
+    stack = stack_at(stack, (rows, 2))
     y, x = pix // width, pix % width
     pseq = pixel_sequence(max(sequence, 0), pix)
     sr = sg = sb = gr = gg = gb = hx = hy = hz = sq = 0.0
