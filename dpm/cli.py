@@ -26,8 +26,8 @@ if TYPE_CHECKING:
     from dpm.options import RenderOptions
 
 # the README's first render on 2 idle cores: 77-88 s (AMD Zen 5), 83 s (Intel Xeon), 97-155 s
-# (Zen 4), 262-272 s (Zen 3, AVX2 only); cold_start.py
-FIRST_RUN = "one and a half to five minutes on 2 cores"
+# (Zen 4), 262-382 s (Zen 3, AVX2 only, whose speed varies from hour to hour); cold_start.py
+FIRST_RUN = "one and a half to seven minutes on 2 cores"
 
 
 class _Parser(argparse.ArgumentParser):
