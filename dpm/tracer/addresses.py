@@ -2,14 +2,15 @@
 
 A Numba function that is not inlined receives each array argument as its whole struct (data,
 shape, strides, item size, owner: 9 words for a 2-D array), and a NamedTuple of arrays as all
-of its members': a `SceneArrays` is 135 words and a `BVHArrays` 43, pushed on the stack at
+of its members': a `SceneArrays` is 141 words and a `BVHArrays` 43, pushed on the stack at
 every call. Measured on Zen 3 (one thread): the traversal's calls cost 18 ns of a 60-ns ray
 that misses everything, and `pt` on the ring spent about a quarter of its time copying the
 arguments of the camera's specular chain. A bundle's addresses and shapes (`words`) are
 2-4 words an array (`by_address`), and the arrays are made again on the other side.
 
-The arrays must be C-contiguous (checked when the caller is compiled) and stay alive for the
-call (the caller holds them): the views made here own nothing.
+The arrays must be C-contiguous (checked when the caller is compiled, by `address` and
+`by_address`) and stay alive for the call: the views made here own nothing, so each wrapper
+ends with `keep_alive` on what it passed.
 """
 
 from __future__ import annotations
@@ -27,13 +28,27 @@ from dpm.tracer.bvh import BVHArrays
 
 @intrinsic
 def address(typingctx, array):
-    """The address (int64) of an array's first element."""
+    """The address (int64) of a C-contiguous array's first element."""
+    _layout(array)
 
     def codegen(context, builder, sig, args):
         data = context.make_array(sig.args[0])(context, builder, args[0]).data
         return builder.ptrtoint(data, ir.IntType(64))
 
     return types.int64(array), codegen
+
+
+@intrinsic
+def keep_alive(typingctx, *values):
+    """Nothing, at run time; to Numba, a use of `values` after the call that reads their
+    addresses. Numba frees an array after its last use, not at the end of its scope: an array
+    made for the call (`new_stack(depth)` as an argument) would be freed before the callee
+    used its memory."""
+
+    def codegen(context, builder, sig, args):
+        return context.get_dummy_value()
+
+    return types.none(types.StarArgTuple(values)), codegen
 
 
 def _view(context, builder, array_type, at, dims):
@@ -172,3 +187,19 @@ bvh_words, bvh_at = by_address(
     )
 )  # fmt: skip
 stack_at = array_at(types.int64, 2)
+
+
+@intrinsic
+def stack_words(typingctx, stack):
+    """(address, rows) of a traversal stack (`new_stack`: int64 rows of 2, C-contiguous),
+    for `stack_at`; another array does not compile."""
+    if stack != types.Array(types.int64, 2, "C"):
+        raise TypingError(f"a traversal stack is a C-contiguous 2-D int64 array, not {stack}")
+
+    def codegen(context, builder, sig, args):
+        array = context.make_array(stack)(context, builder, args[0])
+        rows = cgutils.unpack_tuple(builder, array.shape, 2)[0]
+        at = builder.ptrtoint(array.data, ir.IntType(64))
+        return context.make_tuple(builder, sig.return_type, [at, rows])
+
+    return types.UniTuple(types.int64, 2)(stack), codegen

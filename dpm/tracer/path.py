@@ -18,7 +18,15 @@ import numpy as np
 
 from dpm.camera import Camera
 from dpm.scene import DIFFUSE, Scene
-from dpm.tracer.addresses import address, bvh_at, bvh_words, scene_at, scene_words, stack_at
+from dpm.tracer.addresses import (
+    bvh_at,
+    bvh_words,
+    keep_alive,
+    scene_at,
+    scene_words,
+    stack_at,
+    stack_words,
+)
 from dpm.tracer.bsdf import scatter_specular, specular_survival
 from dpm.tracer.bvh import BVH
 from dpm.tracer.lights import (
@@ -82,10 +90,12 @@ def shade_one(
 ):  # fmt: skip
     """RGB radiance reflected by the diffuse point p (normal n towards the viewer, albedo a).
     Called (`_shade_one`) with the BVH, the scene and the stack passed by address."""
-    return _shade_one(
+    out = _shade_one(
         bvh_words(bvh), scene_words(sc), seed, stream, pseq, index, eps, caustics, grid,
-        address(stack), stack.shape[0], px, py, pz, nx, ny, nz, ar, ag, ab,
+        *stack_words(stack), px, py, pz, nx, ny, nz, ar, ag, ab,
     )  # fmt: skip
+    keep_alive(bvh, sc, stack)
+    return out
 
 
 # Compiled without Numba's reference counting (`_nrt=False`; it allocates nothing). With it,
@@ -93,7 +103,7 @@ def shade_one(
 # scatter_specular, ...) increments and decrements each array's reference count: some forty
 # atomic updates per ray on counters that both threads share, which cost a third of the
 # shading time on two cores. Functions inlined into it inherit the setting; the traversal
-# functions it calls (`closest_hit`, `any_hit`) are compiled with it as well.
+# functions it calls (`_closest_hit`, `_any_hit`) are compiled with it as well.
 @nb.njit(cache=True, _nrt=False, error_model="numpy")
 def _shade_one(
     bvh, sc, seed, stream, pseq, index, eps, caustics, grid, stack, rows, px, py, pz, nx, ny,
@@ -286,11 +296,13 @@ def path_pixel(
 ):  # fmt: skip
     """`_path_pixel`, called with the BVH, the scene, the stack and the packet passed by
     address (`dpm.tracer.addresses`: as Numba structs they were some 360 words a call)."""
-    return _path_pixel(
+    out = _path_pixel(
         bvh_words(bvh), scene_words(sc), cam, width, height, pix, first, spp, stride, seed,
-        sequence, qfirst, eps, caustics, emission, grid, address(stack), stack.shape[0],
+        sequence, qfirst, eps, caustics, emission, grid, *stack_words(stack),
         packet_words(packet),
     )  # fmt: skip
+    keep_alive(bvh, sc, stack, packet)
+    return out
 
 
 @nb.njit(cache=True, _nrt=False, error_model="numpy")

@@ -1,12 +1,13 @@
 """Ray queries: the watertight ray–triangle test and closest-hit / any-hit BVH traversal.
 
 The single-ray functions (`closest_hit`, `any_hit`) are what other Numba kernels call inside
-their own `prange` loops; the `*_batch` kernels run them over arrays of rays. They are
-compiled once, not inlined into each caller: inlined, the traversal loop was copied into
+their own `prange` loops; the `*_batch` kernels run them over arrays of rays. They are small
+inlined wrappers; the traversal itself (`_closest_hit`, `_any_hit`) is compiled once, not
+inlined into each caller: inlined, the traversal loop was copied into
 every call site (camera chains call it five times), and the first render compiled for three
 minutes instead of about one and a half, for no measurable speed. What they pass is kept
 small: the BVH's arrays and the stack go as addresses and sizes (`_bvh_address`), not as
-Numba's array structs, whose 45 words were pushed on the stack at every call (closest hits
+Numba's array structs, whose 52 words were pushed on the stack at every call (closest hits
 +9-26 % a thread on Zen 3).
 
 Triangle tests are float64 on float32 geometry, with no fastmath: watertightness needs exact
@@ -26,7 +27,7 @@ from numba.core import cgutils, types
 from numba.extending import intrinsic
 
 from dpm.scene import Scene
-from dpm.tracer.addresses import address, array_at
+from dpm.tracer.addresses import address, array_at, keep_alive, stack_words
 from dpm.tracer.bvh import LEAF_BITS, MAX_LEAF, RECORD, REFS, WIDTH, BVHArrays
 
 # A leaf's triangles take one float64 lane each: 4 lanes fill one 256-bit register, which
@@ -527,9 +528,9 @@ def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     `bvh` is a BVHArrays; `stack` is scratch from `new_stack`. Inlined: it passes the arrays
     to `_closest_hit` (not inlined) as addresses.
     """
-    return _closest_hit(
-        *_bvh_address(bvh), ox, oy, oz, dx, dy, dz, tmax, address(stack), stack.shape[0]
-    )
+    out = _closest_hit(*_bvh_address(bvh), ox, oy, oz, dx, dy, dz, tmax, *stack_words(stack))
+    keep_alive(bvh, stack)
+    return out
 
 
 @nb.njit(cache=True, _nrt=False, error_model="numpy")
@@ -635,9 +636,9 @@ def closest_below(bvh, start, ray, planes_at, k, o, s, best_t, best, stack):
 def any_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
     """True if the ray hits any triangle at a distance in (0, tmax). Inlined, as
     `closest_hit`: the work is in `_any_hit`."""
-    return _any_hit(
-        *_bvh_address(bvh), ox, oy, oz, dx, dy, dz, tmax, address(stack), stack.shape[0]
-    )
+    out = _any_hit(*_bvh_address(bvh), ox, oy, oz, dx, dy, dz, tmax, *stack_words(stack))
+    keep_alive(bvh, stack)
+    return out
 
 
 @nb.njit(cache=True, _nrt=False, error_model="numpy")

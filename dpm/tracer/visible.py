@@ -21,7 +21,15 @@ import numpy as np
 from dpm.camera import Camera
 from dpm.filters import dilate3
 from dpm.scene import DIELECTRIC, DIFFUSE, Scene
-from dpm.tracer.addresses import address, bvh_at, bvh_words, scene_at, scene_words, stack_at
+from dpm.tracer.addresses import (
+    bvh_at,
+    bvh_words,
+    keep_alive,
+    scene_at,
+    scene_words,
+    stack_at,
+    stack_words,
+)
 from dpm.tracer.bsdf import (
     fresnel_dielectric,
     reflect,
@@ -127,10 +135,10 @@ def camera_sample(bvh, sc, cam, width, height, x, y, sx, sy, stream, seed, eps, 
 @nb.njit(cache=True, inline="always", error_model="numpy")
 def lean_from(bvh, sc, dx, dy, dz, hit, stream, seed, eps, stack):
     """`chain_from`, the same values, with the chain through mirrors and glass called
-    (`camera_chain`) rather than inlined: a miss or a diffuse first hit returns at once. In
-    `path_pixel`, which inlines the path's shading too, the inlined chain made the kernel
-    larger and slower (`pt` on the ring 4.9-6.1 M samples/s, varying from process to
-    process, against 6.3-6.4); where the camera sample is all a kernel does
+    (`_camera_chain`, through `camera_chain`) rather than inlined: a miss or a diffuse first
+    hit returns at once. In `path_pixel`, which inlines the path's shading too, the inlined
+    chain made the kernel larger and slower (`pt` on the ring 4.9-6.1 M samples/s, varying
+    from process to process, against 6.3-6.4); where the camera sample is all a kernel does
     (`visible_pixel`), the call made it slower (16.8 against 9.0)."""
     tri, _, px, py, pz, nx, ny, nz, m, cos_i, front = hit
     z = 0.0
@@ -226,10 +234,11 @@ def chain_from(bvh, sc, dx, dy, dz, hit, stream, seed, eps, stack):
 @nb.njit(cache=True, inline="always")
 def camera_chain(bvh, sc, dx, dy, dz, hit, stream, seed, eps, stack):
     """`chain_from`, called (`_camera_chain`) with its arrays passed by address."""
-    return _camera_chain(
-        bvh_words(bvh), scene_words(sc), dx, dy, dz, hit, stream, seed, eps,
-        address(stack), stack.shape[0],
-    )  # fmt: skip
+    out = _camera_chain(
+        bvh_words(bvh), scene_words(sc), dx, dy, dz, hit, stream, seed, eps, *stack_words(stack)
+    )
+    keep_alive(bvh, sc, stack)
+    return out
 
 
 @nb.njit(cache=True, _nrt=False, error_model="numpy")
@@ -250,12 +259,13 @@ def visible_pixel(
     Called (`_visible_pixel`) with the BVH, the scene and the stack passed by address."""
     _visible_pixel(
         bvh_words(bvh), scene_words(sc), cam, width, height, pix, row, spp, seed, sequence,
-        first, eps, address(stack), stack.shape[0], position, normal, albedo, throughput,
-        emitted, hit, pixel, sample,
+        first, eps, *stack_words(stack), position, normal, albedo, throughput, emitted, hit,
+        pixel, sample,
     )  # fmt: skip
+    keep_alive(bvh, sc, stack)
 
 
-# Compiled without Numba's reference counting, as `dpm.tracer.path.shade_one` (see there).
+# Compiled without Numba's reference counting, as `dpm.tracer.path._shade_one` (see there).
 @nb.njit(cache=True, _nrt=False, error_model="numpy")
 def _visible_pixel(
     bvh, sc, cam, width, height, pix, row, spp, seed, sequence, first, eps, stack, rows,
@@ -322,19 +332,21 @@ def trace_visible_points(
     return VisiblePoints(*vec, hit, pixel, sample, footprint)
 
 
-# A function of its own, called once per pixel, so the `prange` kernel below stays small:
-# Numba's parallel passes over a kernel with the camera chain inlined took 20 s to compile.
 @nb.njit(cache=True, inline="always")
 def emitted_pixel(bvh, sc, cam, width, height, pix, count, first, seed, eps, stack):
     """(r, g, b, squared luminance) sums over samples first … first + count - 1 of pixel pix's
     scrambled Sobol sequence: the radiance of lights seen along their specular chains.
     Called (`_emitted_pixel`) with the BVH, the scene and the stack passed by address."""
-    return _emitted_pixel(
+    out = _emitted_pixel(
         bvh_words(bvh), scene_words(sc), cam, width, height, pix, count, first, seed, eps,
-        address(stack), stack.shape[0],
+        *stack_words(stack),
     )  # fmt: skip
+    keep_alive(bvh, sc, stack)
+    return out
 
 
+# A function of its own, called once per pixel, so the `prange` kernel below stays small:
+# Numba's parallel passes over a kernel with the camera chain inlined took 20 s to compile.
 @nb.njit(cache=True, _nrt=False, error_model="numpy")
 def _emitted_pixel(bvh, sc, cam, width, height, pix, count, first, seed, eps, stack, rows):
     """`emitted_pixel` on the `dpm.tracer.addresses` words of its BVH, scene and stack."""
