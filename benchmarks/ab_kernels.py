@@ -92,7 +92,7 @@ def main() -> None:
     parser.add_argument("--kind", choices=("bvh", "pt"), default="bvh")
     parser.add_argument("--rounds", type=int, default=9)
     parser.add_argument("--worker", help=argparse.SUPPRESS)
-    args = parser.parse_args()
+    args = parser.parse_intermixed_args()
     if args.worker:
         _worker(args.worker, args.kind, args.scenes)
         return
