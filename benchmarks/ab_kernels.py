@@ -13,8 +13,9 @@ runs of `test_bvh.py` or `path_speed.py` (minutes apart) cannot.
 Tasks, after one untimed run each (compilation): `--kind bvh` (default), on one thread,
 closest and any hits of 200,000 incoherent rays and of one camera ray per pixel at 384 × 384
 (`test_bvh`'s rays); `--kind pt`, on all threads, a `pt` render at 128 pixels wide and 32
-samples per pixel, less its BVH build. Prints each task's median rate on both sides and the
-median of the per-round ratios new / old (with their range), then their geometric mean.
+samples per pixel, less its BVH build. Scenes are examples or unseen ones (`test_bvh.PATHS`).
+Prints each task's median rate on both sides and the median of the per-round ratios
+new / old (with their range), then their geometric mean.
 """
 
 from __future__ import annotations
@@ -35,8 +36,12 @@ DEFAULT_SCENES = ["dragon", "ring", "pool1", "glass_egg", "far_wall", "glass_lan
 def _worker(tree: str, kind: str, scenes: list[str]) -> None:
     """Prepare the tasks on tree's dpm, print 'name/work' per task tab-separated, then time
     task k (seconds) for each line k read from stdin."""
+    # this tree's benchmarks/ only (the driver's script directory may be another tree's)
+    here = Path(__file__).resolve().parent
+    sys.path[:] = [p for p in sys.path if p and Path(p).resolve() != here]
     sys.path.insert(0, str(Path(tree) / "benchmarks"))
     import numba
+    from test_bvh import PATHS
 
     import dpm
 
@@ -63,19 +68,18 @@ def _worker(tree: str, kind: str, scenes: list[str]) -> None:
                     run()
                     tasks.append((f"{name}:{ray_kind}:{query}", len(o), run))
     else:
-        from common import SCENES
         from dpm import load_scene
         from dpm.renderer import RenderOptions, render
 
         for name in scenes:
-            scene = load_scene(SCENES / f"{name}.obj")
+            scene = load_scene(PATHS[name])
             options = RenderOptions(method="pt", spp=32, seed=1, width=128, progress=False)
-            render(scene, options)
+            samples = render(scene, options).stats["samples"]  # the camera's aspect sets H
 
             def run(scene=scene, options=options):
                 return render(scene, options).stats["seconds"]["bvh"]  # not to count
 
-            tasks.append((f"{name}:pt", 128 * 128 * 32, run))
+            tasks.append((f"{name}:pt", samples, run))
     print("\t".join(f"{name}/{work}" for name, work, _ in tasks), flush=True)
     for line in sys.stdin:
         _, _, run = tasks[int(line)]
