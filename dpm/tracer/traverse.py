@@ -71,13 +71,18 @@ def ray_setup(dx, dy, dz):
 def ray_setup_inverse(dx, dy, dz, kz, inv):
     """`ray_setup` given the dominant axis kz (`_dominant_axis`) and inv = 1 / d[kz]: a
     packet has all three inverses already (the single-ray traversals use `_one_ray`)."""
-    dkz = pick(kz, dx, dy, dz)
-    flip = np.int64(dkz < 0)  # keep the winding, so front faces stay front faces
+    kx, ky = _other_axes(kz, pick(kz, dx, dy, dz) < 0)
+    return kx, ky, kz, -pick(kx, dx, dy, dz) * inv, -pick(ky, dx, dy, dz) * inv, inv
+
+
+@nb.njit(cache=True, inline="always")
+def _other_axes(kz, negative):
+    """The watertight test's kx, ky after axis kz, swapped where d[kz] is negative (keeps the
+    winding, so front faces stay front faces)."""
+    flip = np.int64(negative)
     a = kz + 1 - 3 * np.int64(kz == 2)
     b = a + 1 - 3 * np.int64(a == 2)
-    kx = a + flip * (b - a)
-    ky = b + flip * (a - b)
-    return kx, ky, kz, -pick(kx, dx, dy, dz) * inv, -pick(ky, dx, dy, dz) * inv, inv
+    return a + flip * (b - a), b + flip * (a - b)
 
 
 @nb.njit(cache=True, inline="always", error_model="numpy")
@@ -551,11 +556,9 @@ def _one_ray(ox, oy, oz, dx, dy, dz):
     ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
     kz = _dominant_axis(dx, dy, dz)
     # as `ray_setup_inverse`, with d[kz] < 0 read off the signs (no pick)
-    flip = np.int64(((kz == 0) & (dx < 0)) | ((kz == 1) & (dy < 0)) | ((kz == 2) & (dz < 0)))
-    a = kz + 1 - 3 * np.int64(kz == 2)
-    b = a + 1 - 3 * np.int64(a == 2)
-    kx = a + flip * (b - a)
-    ky = b + flip * (a - b)
+    kx, ky = _other_axes(
+        kz, ((kz == 0) & (dx < 0)) | ((kz == 1) & (dy < 0)) | ((kz == 2) & (dz < 0))
+    )
     ax, ay, az = _permuted(kx, ky, kz, dx, dy, dz)
     o = _permuted(kx, ky, kz, ox, oy, oz)
     inv = 1.0 / az
@@ -579,7 +582,7 @@ def closest_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
 @nb.njit(cache=True, _nrt=False, error_model="numpy")
 def _closest_hit(nodes, n_nodes, planes, n_planes, order, n_tri, ox, oy, oz, dx, dy, dz, tmax,
                  stack_address, stack_rows):  # fmt: skip
-    """`closest_hit` on the arrays at the addresses `_bvh_address` and `address` give."""
+    """`closest_hit` on the words `_bvh_address` and `stack_words` give."""
     bvh = _bvh_at(nodes, n_nodes, planes, n_planes, order, n_tri)
     stack = stack_at(stack_address, (stack_rows, 2))
     ray, planes_at, k, o, s = _one_ray(ox, oy, oz, dx, dy, dz)
@@ -681,7 +684,7 @@ def any_hit(bvh, ox, oy, oz, dx, dy, dz, tmax, stack):
 @nb.njit(cache=True, _nrt=False, error_model="numpy")
 def _any_hit(nodes, n_nodes, planes, n_planes, order, n_tri, ox, oy, oz, dx, dy, dz, tmax,
              stack_address, stack_rows):  # fmt: skip
-    """`any_hit` on the arrays at the addresses `_bvh_address` and `address` give."""
+    """`any_hit` on the words `_bvh_address` and `stack_words` give."""
     bvh = _bvh_at(nodes, n_nodes, planes, n_planes, order, n_tri)
     stack = stack_at(stack_address, (stack_rows, 2))
     ray, planes_at, k, o, s = _one_ray(ox, oy, oz, dx, dy, dz)
