@@ -55,6 +55,9 @@ from dpm.tracer.wavefront import batch_starts, wavefront_kernel
 
 DIMS_PER_VERTEX = 8  # Fresnel, light pick, light point (2), direction (2), roulette, spare
 SAMPLES_PER_TASK = 64
+# Whole-pixel tasks (`pixels_kernel`) take at least this many pixels: each task allocates its
+# traversal stack and packet (24 arrays), which at one pixel a task (64 spp) cost `pt` 2-4 %.
+MIN_PIXELS_PER_TASK = 8
 # Vertices after the visible point whose light sample and direction come from the pixel's
 # stratified sequence (`stratified2`) when one is given; later ones from `uniform`.
 STRATIFIED_VERTICES = 1
@@ -384,7 +387,7 @@ def pixels_kernel(
     spp camera paths, the mean denoiser guides (`dpm.denoise.guides`) and (P,) the sum of the
     paths' squared luminances; returns (visible points found, non-finite samples dropped)."""
     n = (row1 - row0) * width
-    per_task = max(1, SAMPLES_PER_TASK // spp)
+    per_task = max(MIN_PIXELS_PER_TASK, SAMPLES_PER_TASK // spp)
     n_tasks = (n + per_task - 1) // per_task
     hits = np.zeros(n_tasks, np.int64)
     bad = np.zeros(n_tasks, np.int64)

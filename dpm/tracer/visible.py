@@ -58,6 +58,9 @@ LUMINANCE = (0.2126, 0.7152, 0.0722)  # Rec. 709 weights (dpm.density.base.lumin
 
 _NO_HIT = (-1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0.0, False)  # `next_surface`'s miss
 SCATTER = 2**31 - 1  # a prime above any task count: i -> i·SCATTER mod n is a permutation
+# Pixels of one parallel task, which allocates one traversal stack for them (a stack a
+# pixel was a malloc and a free for each pixel of every pass)
+PIXELS_PER_TASK = 16
 LIGHT_TEST_TRIANGLES = 16  # lights with more triangles are found by tracing, not one by one
 
 
@@ -298,12 +301,15 @@ def visible_points_kernel(
     position, normal, albedo, throughput, emitted, hit, pixel, sample,
 ):  # fmt: skip
     """Fill the output arrays (one row per sample of image rows row0..row1-1)."""
-    for p in nb.prange((row1 - row0) * width):
-        visible_pixel(
-            bvh, sc, cam, width, height, row0 * width + p, p * spp, spp, seed, sequence, first,
-            eps, new_stack(depth), position, normal, albedo, throughput, emitted, hit, pixel,
-            sample,
-        )  # fmt: skip
+    n = (row1 - row0) * width
+    for task in nb.prange((n + PIXELS_PER_TASK - 1) // PIXELS_PER_TASK):
+        stack = new_stack(depth)
+        for p in range(task * PIXELS_PER_TASK, min(n, (task + 1) * PIXELS_PER_TASK)):
+            visible_pixel(
+                bvh, sc, cam, width, height, row0 * width + p, p * spp, spp, seed, sequence,
+                first, eps, stack, position, normal, albedo, throughput, emitted, hit, pixel,
+                sample,
+            )  # fmt: skip
 
 
 def trace_visible_points(
@@ -373,14 +379,15 @@ def _emitted_kernel(bvh, depth, sc, cam, width, height, pixels, counts, first, s
     """out[i], sq[i] = the sums of the emitted radiance and of its squared luminance over
     samples first[i] … first[i] + counts[i] - 1 of pixel pixels[i]'s sequence."""
     n = len(pixels)
-    for t in nb.prange(n):
-        # Threads take contiguous ranges of t: scattered over the list, each gets a share of
-        # the pixels whose chains run long (in glass) and of those that end at once.
-        i = (t * SCATTER) % n
-        out[i, 0], out[i, 1], out[i, 2], sq[i] = emitted_pixel(
-            bvh, sc, cam, width, height, pixels[i], counts[i], first[i], seed, eps,
-            new_stack(depth),
-        )  # fmt: skip
+    for task in nb.prange((n + PIXELS_PER_TASK - 1) // PIXELS_PER_TASK):
+        stack = new_stack(depth)
+        for t in range(task * PIXELS_PER_TASK, min(n, (task + 1) * PIXELS_PER_TASK)):
+            # Threads take contiguous ranges of t: scattered over the list, each gets a share
+            # of the pixels whose chains run long (in glass) and of those that end at once.
+            i = (t * SCATTER) % n
+            out[i, 0], out[i, 1], out[i, 2], sq[i] = emitted_pixel(
+                bvh, sc, cam, width, height, pixels[i], counts[i], first[i], seed, eps, stack
+            )
 
 
 def trace_emitted(
@@ -414,11 +421,13 @@ def trace_emitted(
 @nb.njit(cache=True, parallel=True, error_model="numpy")
 def _specular_kernel(bvh, depth, sc, cam, width, height, out):
     """out[p] = whether pixel p's centre sees a mirror or glass first."""
-    for p in nb.prange(width * height):
+    n = width * height
+    for task in nb.prange((n + PIXELS_PER_TASK - 1) // PIXELS_PER_TASK):
         stack = new_stack(depth)
-        dx, dy, dz = camera_ray(cam, width, height, p % width + 0.5, p // width + 0.5)
-        hit = next_surface(bvh, sc, cam[0, 0], cam[0, 1], cam[0, 2], dx, dy, dz, stack)
-        out[p] = hit[0] >= 0 and sc.kind[hit[8]] != DIFFUSE
+        for p in range(task * PIXELS_PER_TASK, min(n, (task + 1) * PIXELS_PER_TASK)):
+            dx, dy, dz = camera_ray(cam, width, height, p % width + 0.5, p // width + 0.5)
+            hit = next_surface(bvh, sc, cam[0, 0], cam[0, 1], cam[0, 2], dx, dy, dz, stack)
+            out[p] = hit[0] >= 0 and sc.kind[hit[8]] != DIFFUSE
 
 
 def specular_pixels(scene: Scene, bvh: BVH, camera: Camera) -> np.ndarray:
