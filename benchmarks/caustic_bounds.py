@@ -15,6 +15,11 @@ statistics the filter reads), and against the scene's SPPM caustic reference
   seeds (the rest: bias and the reference's own noise);
 - `bias floor`: what a filter that removed all variance and added no bias would score,
   √(1 − variance share);
+- `narrow floor`, `extrapolated floor`: the same for the narrow kernel's estimate and for the
+  extrapolated one (`stats.extrapolated`, the two kernels' blur cancelled to second order),
+  √((their mean squared error − their variance across seeds) / the render's mean squared
+  error): what a filter of those estimates could reach at best (the shipped filter's taps
+  stop at the narrow one's blur; 0 where the seeds' mean matches the reference within noise);
 - `others' mean`: the mean of the other seeds' renders (the same bias, a fifth of the
   variance with six seeds), and that mean held within the clamp of each render
   (`stats.clamp_to_own`): whether the clamp lets a low-variance estimate through;
@@ -52,8 +57,9 @@ from dpm.metrics import rmse  # noqa: E402
 from dpm.tracer import build_bvh  # noqa: E402
 
 TABLE = RESULTS / "caustic_bounds.md"
-COLUMNS = ("filter", "variance share", "bias floor", "others' mean", "others' mean held",
-           "reference held", "3 x 3 box", "noise left by 3 x 3")  # fmt: skip
+COLUMNS = ("filter", "variance share", "bias floor", "narrow floor", "extrapolated floor",
+           "others' mean", "others' mean held", "reference held", "3 x 3 box",
+           "noise left by 3 x 3")  # fmt: skip
 OTHERS = COLUMNS[3]
 
 
@@ -75,7 +81,13 @@ def scene_rows(name: str, which: str, passes: tuple[int, ...], seeds: list[int])
         plain = float(np.mean([rmse(x, ref) for x in images]))
         mean = images.mean(axis=0)
         variance = float(images.var(axis=0, ddof=1).mean())
-        share = variance / float(((images - ref) ** 2).mean())
+        mse = float(((images - ref) ** 2).mean())
+        share = variance / mse
+        floors = []
+        for of in (lambda s: s.narrow, lambda s: stats.extrapolated(s.wide, s.narrow)):
+            e = np.stack([of(s).reshape(h, w, 3) for s in runs])
+            bias2 = float(((e - ref) ** 2).mean()) - float(e.var(axis=0, ddof=1).mean())
+            floors.append(np.sqrt(max(bias2, 0.0) / mse))
         filtered, others, held, oracle = [], [], [], []
         for s, x in zip(runs, images, strict=True):
             filtered.append(rmse(forward.filter_caustics(weights, s).reshape(h, w, 3), ref))
@@ -85,7 +97,7 @@ def scene_rows(name: str, which: str, passes: tuple[int, ...], seeds: list[int])
             oracle.append(rmse(stats.clamp_to_own(s, ref.reshape(-1, 3)).reshape(h, w, 3), ref))
         box = [rmse(uniform_filter(x, (3, 3, 1), mode="nearest"), ref) for x in images]
         left = uniform_filter(images - mean, (1, 3, 3, 1), mode="nearest").var(axis=0, ddof=1)
-        values = (np.mean(filtered) / plain, share, np.sqrt(max(1.0 - share, 0.0)),
+        values = (np.mean(filtered) / plain, share, np.sqrt(max(1.0 - share, 0.0)), *floors,
                   np.mean(others) / plain, np.mean(held) / plain, np.mean(oracle) / plain,
                   np.mean(box) / plain, float(left.mean()) / variance)  # fmt: skip
         row = {"set": which, "scene": name, "passes": p, "rmse": plain, "reference_noise": noise,
@@ -136,7 +148,9 @@ def main() -> None:
             lines.append(
                 f"- {which}, {p_} passes: geometric means: filter "
                 f"{geomean([r['filter'] for r in at]):.3f}, bias floor "
-                f"{geomean([r['bias floor'] for r in at]):.3f}, others' mean "
+                f"{geomean([r['bias floor'] for r in at]):.3f} (narrow "
+                f"{geomean([max(r['narrow floor'], 1e-3) for r in at]):.3f}, extrapolated "
+                f"{geomean([max(r['extrapolated floor'], 1e-3) for r in at]):.3f}), others' mean "
                 f"{geomean([r[OTHERS] for r in at]):.3f}, "
                 f"reference held {geomean([r['reference held'] for r in at]):.3f}, 3 x 3 box "
                 f"{geomean([r['3 x 3 box'] for r in at]):.3f}; variance share "

@@ -210,7 +210,10 @@ def render_main(argv: Sequence[str] | None = None) -> int:
                 paths = paths if stats["spp"] != stats["passes"] else ""
                 plan = f"; {stats['passes']} passes{paths}, {stats['plan']['reason']}"
             if plan and stats["plan"]["caustics"] == "sppm":  # the caustic's moves kept
-                moved = f"{stats['narrow_weight']:.2f} towards the narrow kernel"
+                moved = (
+                    f"{stats['narrow_weight']:.2f} towards the narrow kernel, "
+                    f"{stats['extrapolated_weight']:.2f} towards the extrapolated one"
+                )
                 if stats["plan"]["network"]:
                     moved += f", {stats['network_weight']:.2f} towards the network's"
                 plan += f"; caustic moved {moved} (the passes' halves' best blend)"

@@ -21,11 +21,18 @@ from conftest import write_scene
 from dpm import load_scene
 from dpm.caustic import forward as caustic_forward
 from dpm.caustic.halves import PassHalves
-from dpm.caustic.stats import CLAMP_Z, DILATIONS, CausticStats, candidates, features
+from dpm.caustic.stats import (
+    CLAMP_Z,
+    DILATIONS,
+    CausticStats,
+    candidates,
+    extrapolated,
+    features,
+)  # fmt: skip
 from dpm.density.base import luminance
 from dpm.errors import InputError
 from dpm.estimators.ppm import PPMState
-from dpm.methods.auto import Auto, Passes, half_state
+from dpm.methods.auto import NARROW, Auto, Passes, half_state
 from dpm.metrics import rmse
 from dpm.nn.caustic_net import CausticNet, example_features, filter_caustics
 from dpm.nn.weights import Weights, save_weights
@@ -301,8 +308,9 @@ def test_the_halves_hold_what_each_pass_gathered_alone() -> None:
     assert np.array_equal(half.radius, states[0].radius)
 
 
-def weight_of(scene, passes: int, filtered, monkeypatch) -> float:
-    """auto's weight for a filter whose output is filtered(stats) (P, 3), after `passes`."""
+def weights_of(scene, passes: int, filtered, monkeypatch) -> np.ndarray:
+    """auto's weights (narrow, extrapolated, filter) for a filter whose output is
+    filtered(stats) (P, 3), after `passes`."""
     c = scene.camera
     o = RenderOptions(component="caustic", spp=passes, photons=passes * 4 * c.width * c.height,
                       seed=1, network=True, progress=False)  # fmt: skip
@@ -312,7 +320,7 @@ def weight_of(scene, passes: int, filtered, monkeypatch) -> float:
     monkeypatch.setattr(caustic_forward, "filter_caustics", lambda _, s: filtered(s))
     weights = run.blend()
     assert (weights >= 0).all() and weights.sum() <= 1 + 1e-9  # a convex blend, always
-    return weights[1]
+    return weights
 
 
 def test_the_halves_keep_a_filter_that_helps_and_turn_down_one_that_hurts(
@@ -323,10 +331,22 @@ def test_the_halves_keep_a_filter_that_helps_and_turn_down_one_that_hurts(
     o = RenderOptions(component="caustic", spp=256, photons=256 * 4 * c.width * c.height,
                       seed=99, network=False, progress=False)  # fmt: skip
     truth = render(scene, o).image.reshape(-1, 3).astype(np.float64)  # a long render
-    oracle = weight_of(scene, 8, lambda s: truth, monkeypatch)
+    oracle = weights_of(scene, 8, lambda s: truth, monkeypatch)[2]
     assert 0.6 < oracle, oracle  # the reference itself: about all of its move
-    assert weight_of(scene, 8, lambda s: 3 * s.spread, monkeypatch) == 0.0  # thrice too bright
-    assert weight_of(scene, 8, lambda s: s.spread, monkeypatch) == 1.0  # no move: as it is
+    assert weights_of(scene, 8, lambda s: 3 * s.spread, monkeypatch)[2] == 0.0  # thrice too bright
+    # a filter that moves nothing: as it is, with the rest of the simplex (the kernels' moves)
+    narrow, sharp, still = weights_of(scene, 8, lambda s: s.spread, monkeypatch)
+    assert still == pytest.approx(1.0 - narrow - sharp, abs=1e-12)
+
+
+def test_the_extrapolated_estimate_cancels_a_quadratic_blur() -> None:
+    # disc means of irradiance a + b·|x|² about the pixel: a + b·R²/2 at the wide radius R,
+    # a + b·(NARROW·R)²/2 at the narrow one; their extrapolation is a, the value at the pixel
+    a, b, r = np.array([[0.3, 1.0, 2.0]]), np.array([[0.5, -0.2, 4.0]]), 0.7
+    wide, narrow = a + b * r**2 / 2, a + b * (NARROW * r) ** 2 / 2
+    np.testing.assert_allclose(extrapolated(wide, narrow), a, rtol=1e-12)
+    # where the narrow disc's noise takes it below zero, it is held at zero
+    assert (extrapolated(np.ones((2, 3)), np.zeros((2, 3))) == 0).all()
 
 
 def test_the_filters_inputs_and_clamp_equal_their_numpy_formulas() -> None:
@@ -360,7 +380,9 @@ def test_the_filters_inputs_and_clamp_equal_their_numpy_formulas() -> None:
     for size in (3, 9):
         inside = uniform_filter(np.ones((h, w)), size, mode="constant")
         means.append(uniform_filter(image, (size, size, 1), mode="constant") / inside[..., None])
-    want = np.stack([image, narrow.reshape(h, w, 3), *means, spread.reshape(h, w, 3)])
+    sharp = wide + (narrow - wide) * 4 / 3  # Richardson: radii R and R / 2, blur ∝ R²
+    want = np.stack([image, narrow.reshape(h, w, 3), *means, spread.reshape(h, w, 3),
+                     sharp.reshape(h, w, 3)])  # fmt: skip
     np.testing.assert_allclose(candidates(s), np.maximum(want, 0), rtol=1e-6, atol=1e-12)
     filtered = own * rng.uniform(0.2, 3.0, (p, 3))
     photon = s.photon_value()

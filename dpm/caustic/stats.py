@@ -22,8 +22,9 @@ CHANNELS = 15  # features per pixel (`features`)
 # (candidate, dilation, taps per side) of `candidates`: the wide and the narrow estimates at
 # the 5 × 5 neighbouring pixels; the wide one's 3 × 3 and 9 × 9 means at every third and
 # ninth pixel (reaching ±6 and ±18 pixels: sparse photons at few passes); the pixel's own
-# estimate with sparse pixels spread (`auto.spread_sparse`)
-CANDIDATES = ((0, 1, 5), (1, 1, 5), (2, 3, 5), (3, 9, 5), (4, 1, 1))
+# estimate with sparse pixels spread (`auto.spread_sparse`); the extrapolated estimate
+# (`extrapolated`) at the 5 × 5 neighbours, the one candidate with less blur than the narrow
+CANDIDATES = ((0, 1, 5), (1, 1, 5), (2, 3, 5), (3, 9, 5), (4, 1, 1), (5, 1, 5))
 TAPS = sum(size * size for *_, size in CANDIDATES)  # kernel weights per pixel
 SPREAD = 4  # the candidate that is the render's caustic without the network
 DILATIONS = (1, 2, 4, 8)  # of the network's four 3 × 3 layers: it sees 31 × 31 pixels
@@ -34,6 +35,10 @@ DILATIONS = (1, 2, 4, 8)  # of the network's four 3 × 3 layers: it sees 31 × 3
 # through it; the weights before them, trained without augmentation, did best at 1)
 CLAMP_Z, TRAIN_CLAMP_Z = 2.0, 2.0
 TINY = 1e-12  # radiance far below any caustic's, keeping the clamp's ratio finite
+# SPPM's blur grows as the radius squared where a caustic is smooth, and the narrow kernel's
+# radius is half the wide one's (`auto.NARROW`), so wide + (narrow − wide)·4/3 cancels the
+# blur to second order (Richardson extrapolation): less bias than either, more noise
+EXTRAPOLATION = 1 / (1 - 0.5**2)
 
 
 @dataclass
@@ -109,9 +114,16 @@ def _features(
         row[13], row[14] = depth[i], passes
 
 
+def extrapolated(wide: np.ndarray, narrow: np.ndarray) -> np.ndarray:
+    """(..., 3) the Richardson extrapolation of the wide and narrow estimates (..., 3) to a
+    zero radius (`EXTRAPOLATION`), held at zero where the narrow one's noise takes it below."""
+    return np.maximum(wide + EXTRAPOLATION * (narrow - wide), 0.0)
+
+
 def candidates(s: CausticStats) -> np.ndarray:
-    """(5, h, w, 3) float32 the estimates the kernel weighs: wide, narrow, the wide one's
-    3 × 3 and 9 × 9 means (over the pixels inside the image), and the spread one."""
+    """(6, h, w, 3) float32 the estimates the kernel weighs: wide, narrow, the wide one's
+    3 × 3 and 9 × 9 means (over the pixels inside the image), the spread one and the
+    extrapolated one."""
     wide = s.wide.reshape(s.h, s.w, 3)
     means = []
     for size in (3, 9):
@@ -119,7 +131,8 @@ def candidates(s: CausticStats) -> np.ndarray:
         means.append(box_mean(wide, (size, size, 1)) / inside[..., None])
     narrow, spread = (a.reshape(s.h, s.w, 3) for a in (s.narrow, s.spread))
     # running box sums leave -1e-17 where the image is dark: radiance is never negative
-    return np.maximum(np.stack([wide, narrow, *means, spread]), 0.0).astype(np.float32)
+    out = np.stack([wide, narrow, *means, spread, extrapolated(wide, narrow)])
+    return np.maximum(out, 0.0).astype(np.float32)
 
 
 def tap_offsets() -> np.ndarray:

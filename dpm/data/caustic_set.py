@@ -3,11 +3,13 @@ caustic statistics at a ladder of pass counts and an independent long render as 
 
 A shard holds, for each pass count P of `passes`, what `dpm.caustic.stats` makes of the
 render after P passes (`P/features`, `P/candidates`, `P/own`, `P/count`, `P/photon`), and
-`target`: the own estimate of a render of `target_passes` passes with another seed. The
-target is noisy, but its noise is independent of the inputs', so an L2 loss against it has
-the same minimiser as against the truth (Noise2Noise); its bias is SPPM's after that many
-passes. Scenes are `dpm.data.procedural`'s (disjoint from the unseen-scene set, which has a
-generator of its own), at `width`² pixels.
+`target`: the extrapolated estimate (`dpm.caustic.stats.extrapolated`, SPPM's blur cancelled
+to second order) of a render of `target_passes` passes with another seed. The target is
+noisy, but its noise is independent of the inputs', so an L2 loss against it has the same
+minimiser as against the truth (Noise2Noise); the render's own estimate after that many
+passes, the target before, kept its blur, so a filter trained on it learned to keep blur.
+Scenes are `dpm.data.procedural`'s (disjoint from the unseen-scene set, which has a generator
+of its own), at `width`² pixels.
 """
 
 from __future__ import annotations
@@ -58,7 +60,7 @@ def make_caustic_shard(config: DataConfig, index: int, threads: int | None = Non
     all); returns its manifest entry and its files, {path relative to `out`: bytes}."""
     import numba
 
-    from dpm.caustic.stats import candidates, features
+    from dpm.caustic.stats import candidates, extrapolated, features
     from dpm.data.dataset import npz_bytes, scene_files, shard_name
     from dpm.tracer import build_bvh
 
@@ -76,7 +78,8 @@ def make_caustic_shard(config: DataConfig, index: int, threads: int | None = Non
         arrays[f"{p}/count"] = s.own_count.reshape(s.h, s.w).astype(np.float32)
         arrays[f"{p}/photon"] = np.float32(s.photon_value())
     (target,) = caustic_ladder(scene, bvh, base + 2, (config.target_passes,))
-    arrays["target"] = target.own.reshape(target.h, target.w, 3).astype(np.float32)
+    sharp = extrapolated(target.wide, target.narrow)
+    arrays["target"] = sharp.reshape(target.h, target.w, 3).astype(np.float32)
     shard = f"shards/{shard_name(index)}.npz"
     files[shard] = npz_bytes(arrays)
     lit = float(np.mean(arrays["target"]))

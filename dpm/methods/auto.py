@@ -59,7 +59,7 @@ from dpm.camera import Camera
 from dpm.caustic import forward as caustic_forward
 from dpm.caustic.blend import blend_weights
 from dpm.caustic.halves import PassHalves
-from dpm.caustic.stats import CLAMP_Z, CausticStats, f64
+from dpm.caustic.stats import CLAMP_Z, EXTRAPOLATION, CausticStats, extrapolated, f64
 from dpm.denoise import denoise, guides, restore_certain
 from dpm.density.base import luminance
 from dpm.density.progressive import pass_seed
@@ -113,6 +113,13 @@ EMISSION_SAMPLES, EMISSION_EXTRA, EMISSION_CAP = 16, 8, 256
 # 0.090; ring, pool1, red wine unchanged. At z = 1.5: pool2 0.093, pool1 and red wine 1-2 %
 # worse; a third radius (a quarter) gained nothing.
 NARROW, LEPSKI_Z = 0.5, 2.0
+# The halves' blend (`Passes.blend`) fits its weights against the other half's extrapolated
+# estimate (`dpm.caustic.stats.extrapolated`: blur cancelled to second order), not its
+# narrow one, whose blur the fit would otherwise take for the truth
+EXTRAPOLATED_TARGET = True
+# ... and weighs a move towards the extrapolated estimate beside the narrow one's (both
+# switches are for `benchmarks/blend_target.py`, which measured them)
+EXTRAPOLATED_MOVE = True
 SEEN_ERROR = 0.6  # relative standard error of a pixel's light seen below which it skips
 # the denoiser
 # A pixel's caustic from fewer photons than this (relative error 1/√N above SEEN_ERROR) is
@@ -363,6 +370,14 @@ def half_state(halves: PassHalves, half: int, k: int, like: PPMState) -> PPMStat
                     passes=int(halves.passes[half]), alpha=like.alpha)  # fmt: skip
 
 
+def extrapolated_move(stats: CausticStats) -> np.ndarray:
+    """(P, 3) float64 `held_move` towards the extrapolated estimate (no move at sparse
+    pixels), or zeros (a move the blend gives no weight) without EXTRAPOLATED_MOVE."""
+    if not EXTRAPOLATED_MOVE:
+        return np.zeros((len(stats.spread), 3))
+    return held_move(stats, extrapolated(stats.wide, stats.narrow), 0.0)
+
+
 def spread_sparse(
     caustic: np.ndarray, count: np.ndarray, overlap: np.ndarray, h: int, w: int
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -479,7 +494,8 @@ class Auto(Method):
         before it), whether the first pass alone overran the budget, and whether the image
         is the denoised one and its weight in the blend with the plain mean
         (`Passes.denoiser_share`), and the weights of the caustic's moves towards the narrow
-        kernel's estimate and the learned filter's (`Passes.blend`; 0 where not made)."""
+        kernel's estimate, the extrapolated one and the learned filter's (`Passes.blend`; 0
+        where not made)."""
         return {
             "passes": self.passes, "plan": self.plan.as_dict(), "spp": self.spp,
             "caustic_photons": self.caustic_photons, "nonfinite_samples": self.dropped,
@@ -488,7 +504,7 @@ class Auto(Method):
             "pass_seconds": self.pass_seconds, "setup_seconds": self.setup_seconds,
             "overran": self.overran, "denoised": self.denoised,
             "denoiser_share": self.denoiser_share, "narrow_weight": self.narrow_weight,
-            "network_weight": self.network_weight,
+            "extrapolated_weight": self.extrapolated_weight, "network_weight": self.network_weight,
         }  # fmt: skip
 
 
@@ -800,7 +816,7 @@ class Passes:
         m.passes, m.spp, m.plan, m.caustic_photons = j, self.spp, self.plan, self.state.photons
         m.dropped, m.extra_paths = self.dropped, self.extra_paths
         m.denoised, m.denoiser_share = False, 0.0  # set below where the denoiser runs
-        m.narrow_weight = m.network_weight = 0.0  # set by `caustics` where made
+        m.narrow_weight = m.extrapolated_weight = m.network_weight = 0.0  # set by `caustics`
         m.light_pixels = 0 if self.glassy is None else len(self.glassy)
         seen = int(sum(self.glow.half(k).count.sum() for k in (0, 1)))
         m.light_samples = seen - self.spp * self.pixels
@@ -927,68 +943,73 @@ class Passes:
     def caustics(self) -> tuple[np.ndarray, np.ndarray]:
         """(P, 3) float64 caustic radiance per pixel, SPPM's at the sharper of two radii where
         it shows (`sharper_where_biased`) with sparse pixels spread (`spread_sparse`), moved
-        towards the narrow kernel's estimate and the learned filter's as far as the passes'
-        halves say it pays (`blend`), and (P,) the photons in the pixel's disc that tell its
-        error (zero where no caustic was estimated)."""
+        towards the narrow kernel's estimate, the extrapolated one and the learned filter's
+        as far as the passes' halves say it pays (`blend`), and (P,) the photons in the
+        pixel's disc that tell its error (zero where no caustic was estimated)."""
         caustic, sharp = sharper_where_biased(self.state, self.narrow, LEPSKI_Z)  # throughput·ρ/π
         self.method.sharp_pixels = int(sharp.sum())
         if self.footprint is None:  # no caustics were estimated
             return caustic, np.zeros(self.pixels)
         stats = self.caustic_stats((caustic, sharp))
-        moves = [held_move(stats, stats.narrow, 0.0)]
+        moves = [held_move(stats, stats.narrow, 0.0), extrapolated_move(stats)]
         # (the network's seconds: the filter on the whole run and on the half in `blend`)
         with self.watch("network") if self.filter is not None else nullcontext():
             if self.filter is not None:
                 filtered = caustic_forward.filter_caustics(self.filter, stats)
                 moves.append(held_move(stats, filtered, CLAMP_Z))
             weights = self.blend()
-        self.method.narrow_weight = float(weights[0])
+        m = self.method
+        m.narrow_weight, m.extrapolated_weight = float(weights[0]), float(weights[1])
         if self.filter is not None:
-            self.method.network_weight = float(weights[1])
+            m.network_weight = float(weights[2])
         out = stats.spread.copy()
         for w, x in zip(weights, moves, strict=True):
             if w > 0:  # (a move not taken leaves no NaN of its own behind: 0·NaN)
                 out += w * x
-        # The narrow move's photons tell the caustic's error too: fewer of them, more noise.
-        # The narrow disc's photons are among the wide one's, so the two estimates' errors
-        # correlate (covariance about the wide one's variance): the blend's relative
-        # variance is (1 - w²)/N_own + w²/N_narrow, where the narrow move moved the pixel
-        # (not where Lepski's rule took the narrow kernel already, nor where it is sparse).
-        w = weights[0]
-        moved = moves[0].any(axis=1) & (w > 0)
+        # The two kernels' photons tell the caustic's error too. The moves make the estimate
+        # (1 - b)·wide + b·narrow, b = w_n + 4/3·w_e (at a pixel Lepski's rule took narrow:
+        # 1 + w_e/3); the narrow disc's photons are among the wide one's, so their errors
+        # correlate (covariance about the wide one's variance) and its relative variance is
+        # (1 - b²)/N_wide + b²/N_narrow, where a move moved the pixel (not where it is sparse).
+        ext = EXTRAPOLATION * weights[1]
+        b = np.where(sharp, 1.0 + ext - weights[1], weights[0] + ext)
+        moved = (moves[0].any(axis=1) & (weights[0] > 0)) | (moves[1].any(axis=1) & (ext > 0))
+        wide_count = np.maximum(stats.wide_count, 1.0)
         narrow_count = np.maximum(stats.narrow_count, 1.0)
-        own = np.maximum(stats.own_count, 1.0)
-        effective = 1.0 / ((1 - w * w) / own + w * w / narrow_count)
+        effective = 1.0 / ((1 - b * b) / wide_count + b * b / narrow_count)
         return out, np.where(moved, effective, stats.own_count)
 
     def blend(self) -> np.ndarray:
-        """The weights (narrow kernel's[, learned filter's]) of the moves from the caustic
-        estimate towards those two (`dpm.caustic.blend`), fitted on two independent halves
-        of the passes (`PassHalves`): the even passes' half a, its own moves (its narrow
-        estimate, and the filter run on it alone), against the odd half's narrow-kernel
-        estimate. With one pass there are no halves: the narrow kernel 0 (Lepski's rule
-        alone), the filter 1 (the network was trained for it).
+        """The weights (narrow kernel's, extrapolated estimate's[, learned filter's]) of the
+        moves from the caustic estimate towards those (`dpm.caustic.blend`), fitted on two
+        independent halves of the passes (`PassHalves`): the even passes' half a, its own
+        moves (its narrow and extrapolated estimates, and the filter run on it alone),
+        against the odd half's extrapolated estimate. With one pass there are no halves: the
+        kernels' moves 0 (Lepski's rule alone), the filter 1 (the network was trained for it).
 
-        Why the narrow estimate as the target: against the other half's own estimate, which
-        shares a's blur, the filter's weight came out 0.2-0.6 on the unseen spheres where
-        against their reference it is 1.5 (much of what the filter removes is blur); against
-        the narrow one it follows the reference's on the examples (the ring 1.33 / 1.45 /
-        1.53 against 1.38 / 1.59 / 1.58 at 4 / 16 / 64 passes). Fitted both ways and summed,
-        as the denoiser's share is, it scored the same (0.855 against 0.856) for another run
-        of the network. The narrow move, added 2026-11-29 after the same fit gave it on the
-        examples (caustic RMSE 0.962 / 0.926 / 0.929 of Lepski's rule alone at 4 / 16 / 64
-        passes, seeds 1-2, none above 1.017; with the filter 0.988 / 0.972 / 0.975 of the
-        filter alone), is a per-render correction of Lepski's rule: where its test is too
-        timid for the scene, the halves show the narrow kernel closer."""
+        Why an estimate with less blur than a's as the target: against the other half's own
+        estimate, which shares a's blur, the filter's weight came out 0.2-0.6 on the unseen
+        spheres where against their reference it is 1.5 (much of what the filter removes is
+        blur). The narrow one was the target from 2026-11-29 (its weight on the examples
+        followed the one fitted against the reference: the ring 1.33 / 1.45 / 1.53 against
+        1.38 / 1.59 / 1.58 at 4 / 16 / 64 passes); the extrapolated one, with less blur
+        still, since 2026-12-02 (`benchmarks/blend_target.py`, examples, 4 / 16 / 64 passes,
+        seeds 1-2, `--no-network`: 0.991 of the error fitted to the narrow one, worst
+        1.004), and the move towards the extrapolated estimate with it (0.984 more, 0.962 at
+        64 passes: pool2 0.83, worst 1.003). The narrow move, added 2026-11-29 (0.962 / 0.926
+        / 0.929 of Lepski's rule alone), is a per-render correction of Lepski's rule: where
+        its test is too timid for the scene, the halves show the narrow kernel closer."""
         network = self.filter is not None
         if self.halves.passes.min() < 1:
-            return np.array([0.0, 1.0]) if network else np.zeros(1)
+            return np.array([0.0, 0.0, 1.0]) if network else np.zeros(2)
         a = self.caustic_stats(half=0)
-        target = half_state(self.halves, 1, 1, self.narrow).irradiance()
-        moves = [held_move(a, a.narrow, 0.0)]
+        wide, narrow = (half_state(self.halves, 1, k, like).irradiance()
+                        for k, like in enumerate((self.state, self.narrow)))  # fmt: skip
+        target = extrapolated(wide, narrow) if EXTRAPOLATED_TARGET else narrow
+        moves = [held_move(a, a.narrow, 0.0), extrapolated_move(a)]
         if network:
             moves.append(held_move(a, caustic_forward.filter_caustics(self.filter, a), CLAMP_Z))
         weights = blend_weights(moves, target - a.spread)
-        if network and not moves[1].any():  # a filter that moves nothing: as it is
-            weights[1] = 1.0 - weights[0]  # (on the simplex still)
+        if network and not moves[2].any():  # a filter that moves nothing: as it is
+            weights[2] = 1.0 - weights[:2].sum()  # (on the simplex still)
         return weights
