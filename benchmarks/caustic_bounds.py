@@ -60,7 +60,7 @@ TABLE = RESULTS / "caustic_bounds.md"
 COLUMNS = ("filter", "variance share", "bias floor", "narrow floor", "extrapolated floor",
            "others' mean", "others' mean held", "reference held", "3 x 3 box",
            "noise left by 3 x 3")  # fmt: skip
-OTHERS = COLUMNS[3]
+OTHERS = "others' mean"
 
 
 def scene_rows(name: str, which: str, passes: tuple[int, ...], seeds: list[int]) -> list[dict]:
@@ -108,6 +108,12 @@ def scene_rows(name: str, which: str, passes: tuple[int, ...], seeds: list[int])
     return rows
 
 
+def _range(rows: list[dict], column: str) -> str:
+    """'low-high' of a column over rows."""
+    values = [r[column] for r in rows]
+    return f"{min(values):.2f}-{max(values):.2f}"
+
+
 def main() -> None:
     """Run the sets' scenes and write the table."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -148,9 +154,9 @@ def main() -> None:
             lines.append(
                 f"- {which}, {p_} passes: geometric means: filter "
                 f"{geomean([r['filter'] for r in at]):.3f}, bias floor "
-                f"{geomean([r['bias floor'] for r in at]):.3f} (narrow "
-                f"{geomean([max(r['narrow floor'], 1e-3) for r in at]):.3f}, extrapolated "
-                f"{geomean([max(r['extrapolated floor'], 1e-3) for r in at]):.3f}), others' mean "
+                f"{geomean([r['bias floor'] for r in at]):.3f} (ranges, as they reach 0: the "
+                f"narrow one's {_range(at, 'narrow floor')}, the extrapolated one's "
+                f"{_range(at, 'extrapolated floor')}), others' mean "
                 f"{geomean([r[OTHERS] for r in at]):.3f}, "
                 f"reference held {geomean([r['reference held'] for r in at]):.3f}, 3 x 3 box "
                 f"{geomean([r['3 x 3 box'] for r in at]):.3f}; variance share "
