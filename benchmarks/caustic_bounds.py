@@ -18,8 +18,8 @@ statistics the filter reads), and against the scene's SPPM caustic reference
 - `narrow floor`, `extrapolated floor`: the same for the narrow kernel's estimate and for the
   extrapolated one (`stats.extrapolated`, the two kernels' blur cancelled to second order),
   √((their mean squared error − their variance across seeds) / the render's mean squared
-  error): what a filter of those estimates could reach at best (the shipped filter's taps
-  stop at the narrow one's blur; 0 where the seeds' mean matches the reference within noise);
+  error): what a filter of those estimates could reach at best (0 where the seeds' mean
+  matches the reference within noise, or where few seeds underestimate the variance);
 - `others' mean`: the mean of the other seeds' renders (the same bias, a fifth of the
   variance with six seeds), and that mean held within the clamp of each render
   (`stats.clamp_to_own`): whether the clamp lets a low-variance estimate through;

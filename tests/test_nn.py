@@ -594,13 +594,14 @@ def test_relmse_and_mse_teach_the_mean_of_noisy_targets_and_mu_law_does_not() ->
 
 def test_a_caustic_filter_trains_and_the_render_reads_its_weights(tmp_path: Path) -> None:
     from dpm.caustic.forward import load_filter
+    from dpm.caustic.stats import TAPS
 
     text = (ROOT / "configs" / "caustic.toml").read_text()
     for old, new in (('"runs/caustic-data"', f'"{tmp_path / "data"}"'),
                      ('"runs/caustic"', f'"{tmp_path / "run"}"'), ("scenes = 160", "scenes = 3"),
                      ("width = 64", "width = 16"),
                      ("passes = [1, 2, 4, 8, 16, 32, 64, 128]", "passes = [1, 3]"),
-                     ("target_passes = 512", "target_passes = 8"), ("steps = 6000", "steps = 3"),
+                     ("target_passes = 512", "target_passes = 8"), ("steps = 3000", "steps = 3"),
                      ("batch = 16 ", "batch = 2 "),
                      ("scenes_per_batch = 16", "scenes_per_batch = 2"),
                      ("validation_scenes = 12", "validation_scenes = 1"),
@@ -612,7 +613,7 @@ def test_a_caustic_filter_trains_and_the_render_reads_its_weights(tmp_path: Path
     config.write_text(text)
     assert train_main(["--config", str(config), "--quiet"]) == 0
     weights = load_filter(tmp_path / "run" / "model.msgpack")
-    assert weights.out_kernel.shape == (24, 101)
+    assert weights.out_kernel.shape == (24, TAPS)
     rows = (tmp_path / "run" / "metrics.csv").read_text().splitlines()
     assert len(rows) == 5 and all("nan" not in r for r in rows)  # header, steps 0-3
     # the shipped config keeps the held-out best step's weights: those are what it wrote

@@ -2,14 +2,15 @@
 
 `auto`'s caustic is SPPM's estimate a (the wide kernel, or the narrow one where Lepski's rule
 sees the wide one blur). Other estimates b_i of the same light differ from it by moves
-x_i = b_i − a: the narrow kernel's everywhere (less blur, more noise), the learned filter's.
-The render keeps a + Σ w_i·x_i with the weights that bring one half of the passes closest to
-the other half's narrow estimate t (`PassHalves`): least squares over the pixels,
-minimise |a + Σ w_i x_i − t|², on the simplex w_i ≥ 0, Σ w_i ≤ 1. t's noise is independent of
-the first half's, so it adds the same to every blend's error, and its bias is the least the
-render has. The simplex keeps the result a convex blend of non-negative, consistent images:
-non-negative and consistent whatever the fit says (past it the blend could cross zero: the
-glass egg's floor broke into dark holes with a filter weight of 1.5).
+x_i = b_i − a: the narrow kernel's everywhere (less blur, more noise), the extrapolated
+one's (`stats.extrapolated`: blur cancelled to second order, more noise still), the learned
+filter's. The render keeps a + Σ w_i·x_i with the weights that bring one half of the passes
+closest to the other half's extrapolated estimate t (`PassHalves`): least squares over the
+pixels, minimise |a + Σ w_i x_i − t|², on the simplex w_i ≥ 0, Σ w_i ≤ 1. t's noise is
+independent of the first half's, so it adds the same to every blend's error, and its bias
+is the least the render has. The simplex keeps the result a convex blend of non-negative,
+consistent images: non-negative and consistent whatever the fit says (past it the blend
+could cross zero: the glass egg's floor broke into dark holes with a filter weight of 1.5).
 """
 
 from __future__ import annotations

@@ -6,10 +6,10 @@ photons' flux within radius R_j, is an estimate of its own: φ_j / (π R_j² pat
 passes are independent, so the sums of those estimates over the even passes and over the
 odd ones are two independent estimates of the same caustic (at about the same radii), as the
 paths' halves are for the denoiser (`Passes.denoiser_share`). A move of one half (towards
-its narrow kernel's estimate, or the learned filter's) scored against the other tells,
-without any reference, whether it brings that half closer to the truth: the other half's
-noise is independent, so it adds the same to either side of the comparison
-(`dpm.caustic.blend`).
+its narrow kernel's estimate, its extrapolated one, or the learned filter's) scored against
+the other tells, without any reference, whether it brings that half closer to the truth:
+the other half's noise is independent, so it adds the same to either side of the
+comparison (`dpm.caustic.blend`).
 """
 
 from __future__ import annotations

@@ -31,9 +31,10 @@ from dpm.caustic.stats import (
     tap_offsets,
 )  # fmt: skip
 
-# A fresh network's logit for the pixel's own wide estimate: weight 0.97 against the other
-# TAPS - 1 taps' 0.03 (at 6, 0.8: with aimed photons, whose noise is lower at the same pass
-# count, a fresh filter's 20 % blur of the neighbours went past one standard error)
+# A fresh network's logit for the pixel's own wide estimate: weight 0.96 against the other
+# TAPS - 1 taps' 0.04 (0.97 and 0.03 with 101 taps; at 6, 0.8: with aimed photons, whose
+# noise is lower at the same pass count, a fresh filter's 20 % blur of the neighbours went
+# past one standard error)
 CENTRE_LOGIT = 8.0
 
 
