@@ -1,8 +1,8 @@
 """The halves' blend with and without the extrapolated estimate, on the example scenes (the
 set to choose on), inside `auto --component caustic`.
 
-    python benchmarks/blend_target.py [--switch target|move] [--passes 4 16 64] [--seeds 1 2]
-                                      [--network]
+    python benchmarks/blend_target.py [--switch target|move|ratio] [--passes 4 16 64]
+                                      [--seeds 1 2] [--network]
 
 `Passes.blend` fits the weights of its moves (towards the narrow kernel's estimate and, with
 the network, the filter's) to one half of the passes' estimate, computed from the other half.
@@ -11,6 +11,8 @@ The narrow estimate has a quarter of the wide one's blur; the extrapolated one
 averages over the pixels. `--switch target`: the blend fitted to the narrow or the
 extrapolated estimate (`auto.EXTRAPOLATED_TARGET`), without the move towards the latter;
 `--switch move`: that move (`auto.EXTRAPOLATED_MOVE`) off and on, fitted to the extrapolated
+estimate; `--switch ratio`: the extrapolation's blur ratio the first pass's 1/4 everywhere
+or each pixel's own (`auto.PIXEL_BLUR_RATIO`), with the move, fitted to the extrapolated
 estimate. Each example's caustic is rendered in this process both ways, the same seeds (the
 same samples), RMSE against the examples' SPPM caustic references (`caustic_references.py
 --set examples`), mean over the seeds. Writes results/blend_{switch}[_network].md.
@@ -34,11 +36,16 @@ from dpm.metrics import rmse
 from dpm.options import RenderOptions
 from dpm.renderer import render
 
+# the module flag of `dpm.methods.auto` each switch turns off and on
+SWITCHES = {"target": "EXTRAPOLATED_TARGET", "move": "EXTRAPOLATED_MOVE",
+            "ratio": "PIXEL_BLUR_RATIO"}  # fmt: skip
+
 
 def run(switch: str, passes: list[int], seeds: list[int], network: bool) -> list[dict]:
     """Per scene and pass count: RMSE with the switch off and the ratio with it on."""
     auto.EXTRAPOLATED_TARGET = True
-    auto.EXTRAPOLATED_MOVE = False
+    auto.EXTRAPOLATED_MOVE = switch == "ratio"
+    auto.PIXEL_BLUR_RATIO = switch != "ratio"
     rows = []
     for name in EXAMPLES:
         obj, w, h = size(name, "examples")
@@ -53,7 +60,7 @@ def run(switch: str, passes: list[int], seeds: list[int], network: bool) -> list
                                         height=h, seed=seed, progress=False,
                                         network=network)  # fmt: skip
                 for on in (False, True):
-                    setattr(auto, f"EXTRAPOLATED_{switch.upper()}", on)
+                    setattr(auto, SWITCHES[switch], on)
                     errors[on].append(rmse(render(scene, options).image, ref))
             off = float(np.mean(errors[False]))
             row = {"scene": name, "passes": p, "off": off,
@@ -66,7 +73,7 @@ def run(switch: str, passes: list[int], seeds: list[int], network: bool) -> list
 def main() -> None:
     """Run and write the table."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--switch", choices=("target", "move"), default="target")
+    p.add_argument("--switch", choices=("target", "move", "ratio"), default="target")
     p.add_argument("--passes", type=int, nargs="+", default=[4, 16, 64])
     p.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
     p.add_argument("--network", action="store_true", help="with the learned filter")
@@ -84,6 +91,7 @@ def main() -> None:
     what = {
         "target": ("fitted to the other half's narrow estimate", "fitted to its extrapolated one"),
         "move": ("without the move towards the extrapolated estimate", "with it"),
+        "ratio": ("extrapolated at the first pass's blur ratio 1/4", "at each pixel's own"),
     }[a.switch]
     lines = [
         f"# The halves' blend, `--switch {a.switch}`: example scenes",

@@ -84,7 +84,8 @@ def scene_rows(name: str, which: str, passes: tuple[int, ...], seeds: list[int])
         mse = float(((images - ref) ** 2).mean())
         share = variance / mse
         floors = []
-        for of in (lambda s: s.narrow, lambda s: stats.extrapolated(s.wide, s.narrow)):
+        sharp = lambda s: stats.extrapolated(s.wide, s.narrow, s.blur_ratio)  # noqa: E731
+        for of in (lambda s: s.narrow, sharp):
             e = np.stack([of(s).reshape(h, w, 3) for s in runs])
             bias2 = float(((e - ref) ** 2).mean()) - float(e.var(axis=0, ddof=1).mean())
             floors.append(np.sqrt(max(bias2, 0.0) / mse))

@@ -78,7 +78,8 @@ def test_moves_leave_sparse_pixels_spread_or_within_its_error() -> None:
     narrow, spread = np.full((p, 3), 4.0), np.full((p, 3), 1.0)
     ones = np.ones(p)
     stats = CausticStats(1, p, 4, spread, narrow, counts, counts / 4, spread, counts, spread,
-                         window, ones, 0 * ones, np.ones((p, 3)), np.ones((p, 3)))  # fmt: skip
+                         window, ones, ones / 4, 0 * ones, np.ones((p, 3)),
+                         np.ones((p, 3)))  # fmt: skip
     move = held_move(stats, narrow, 0.0)
     assert np.array_equal(move[:2], np.zeros((2, 3)))
     assert np.array_equal(move[2:], np.full((2, 3), 3.0))

@@ -344,9 +344,14 @@ def test_the_extrapolated_estimate_cancels_a_quadratic_blur() -> None:
     # a + b·(NARROW·R)²/2 at the narrow one; their extrapolation is a, the value at the pixel
     a, b, r = np.array([[0.3, 1.0, 2.0]]), np.array([[0.5, -0.2, 4.0]]), 0.7
     wide, narrow = a + b * r**2 / 2, a + b * (NARROW * r) ** 2 / 2
-    np.testing.assert_allclose(extrapolated(wide, narrow), a, rtol=1e-12)
+    np.testing.assert_allclose(extrapolated(wide, narrow, np.array([NARROW**2])), a, rtol=1e-12)
+    # the narrow radius shrunk more slowly, pass by pass: blur ∝ the passes' mean radius²
+    wide_r2, narrow_r2 = np.array([1.0, 0.8, 0.7]) * r**2, np.array([0.25, 0.23, 0.22]) * r**2
+    wide, narrow = a + b * wide_r2.mean() / 2, a + b * narrow_r2.mean() / 2
+    ratio = np.array([narrow_r2.sum() / wide_r2.sum()])
+    np.testing.assert_allclose(extrapolated(wide, narrow, ratio), a, rtol=1e-12)
     # where the narrow disc's noise takes it below zero, it is held at zero
-    assert (extrapolated(np.ones((2, 3)), np.zeros((2, 3))) == 0).all()
+    assert (extrapolated(np.ones((2, 3)), np.zeros((2, 3)), np.full(2, 0.25)) == 0).all()
 
 
 def test_the_filters_inputs_and_clamp_equal_their_numpy_formulas() -> None:
@@ -366,7 +371,8 @@ def test_the_filters_inputs_and_clamp_equal_their_numpy_formulas() -> None:
     albedo, normal = rng.uniform(0, 1, (p, 3)), rng.normal(size=(p, 3))
     albedo[:5] = 0.0  # pixels that see no surface
     s = CausticStats(h, w, 7, wide, narrow, count, count / 3, own, count, spread, count,
-                     rng.uniform(0.1, 4.0, p), rng.normal(size=p), albedo, normal)  # fmt: skip
+                     rng.uniform(0.1, 4.0, p), rng.uniform(0.2, 0.6, p), rng.normal(size=p),
+                     albedo, normal)  # fmt: skip
     lw, ln, ls = luminance(wide), luminance(narrow), luminance(spread)
     scale = lw[albedo.max(axis=1) > 0].mean()
     expected = np.stack([
@@ -380,7 +386,8 @@ def test_the_filters_inputs_and_clamp_equal_their_numpy_formulas() -> None:
     for size in (3, 9):
         inside = uniform_filter(np.ones((h, w)), size, mode="constant")
         means.append(uniform_filter(image, (size, size, 1), mode="constant") / inside[..., None])
-    sharp = wide + (narrow - wide) * 4 / 3  # Richardson: radii R and R / 2, blur ∝ R²
+    # Richardson: blurs in the ratio q (capped at 1/2), blur ∝ R²
+    sharp = wide + (narrow - wide) / (1 - np.minimum(s.blur_ratio, 0.5))[:, None]
     want = np.stack([image, narrow.reshape(h, w, 3), *means, spread.reshape(h, w, 3),
                      sharp.reshape(h, w, 3)])  # fmt: skip
     np.testing.assert_allclose(candidates(s), np.maximum(want, 0), rtol=1e-6, atol=1e-12)
@@ -397,7 +404,9 @@ def test_the_filters_inputs_and_clamp_equal_their_numpy_formulas() -> None:
     for h, w in ((6, 1), (6, 2), (6, 3), (2, 9)):  # images narrower than the 9 × 9 window
         p, one = h * w, np.ones(h * w)
         rgb = rng.uniform(0.5, 2.0, (p, 3))
-        s = CausticStats(h, w, 1, rgb, rgb, one, one, rgb, one, rgb, one, one, one, rgb, rgb)
+        s = CausticStats(
+            h, w, 1, rgb, rgb, one, one, rgb, one, rgb, one, one, one / 4, one, rgb, rgb
+        )
         image = rgb.reshape(h, w, 3)
         for c, size in ((2, 3), (3, 9)):
             inside = uniform_filter(np.ones((h, w)), size, mode="constant")

@@ -301,7 +301,7 @@ def warm() -> None:
                             np.zeros(TAPS, np.float32))  # fmt: skip
     one, rgb = np.ones(1), np.ones((1, 3))
     filter_caustics(weights, CausticStats(1, 1, 1, rgb, rgb, one, one, rgb, one, rgb, one, one,
-                                          one, rgb, rgb))  # fmt: skip
+                                          one, one, rgb, rgb))  # fmt: skip
 
 
 def filter_caustics(weights: FilterWeights, stats: CausticStats) -> np.ndarray:

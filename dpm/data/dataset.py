@@ -86,7 +86,7 @@ class DataConfig:
             from dpm.caustic.stats import CHANNELS, TAPS
 
             d["passes"] = list(self.passes)
-            d["format"] = [CHANNELS, TAPS, "extrapolated target"]
+            d["format"] = [CHANNELS, TAPS, "extrapolated target", "pixel blur ratio"]
             for key in ("budgets", "reference_paths", "reference_radius",
                         "reference_paths_per_pass"):  # fmt: skip
                 d.pop(key)

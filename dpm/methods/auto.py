@@ -59,7 +59,14 @@ from dpm.camera import Camera
 from dpm.caustic import forward as caustic_forward
 from dpm.caustic.blend import blend_weights
 from dpm.caustic.halves import PassHalves
-from dpm.caustic.stats import CLAMP_Z, EXTRAPOLATION, CausticStats, extrapolated, f64
+from dpm.caustic.stats import (
+    CLAMP_Z,
+    FIRST_BLUR_RATIO,
+    CausticStats,
+    extrapolated,
+    extrapolation,
+    f64,
+)
 from dpm.denoise import denoise, guides, restore_certain
 from dpm.density.base import luminance
 from dpm.density.progressive import pass_seed
@@ -120,6 +127,9 @@ EXTRAPOLATED_TARGET = True
 # ... and weighs a move towards the extrapolated estimate beside the narrow one's (both
 # switches are for `benchmarks/blend_target.py`, which measured them)
 EXTRAPOLATED_MOVE = True
+# ... whose blur ratio is each pixel's own (`Passes.blur_ratio`), not the first pass's 1/4
+# (a switch for `benchmarks/blend_target.py --switch ratio`)
+PIXEL_BLUR_RATIO = True
 SEEN_ERROR = 0.6  # relative standard error of a pixel's light seen below which it skips
 # the denoiser
 # A pixel's caustic from fewer photons than this (relative error 1/√N above SEEN_ERROR) is
@@ -277,8 +287,8 @@ def warm_first_kernels(scene: Scene, bvh: BVH, camera: Camera) -> None:
     box_mean(np.zeros((2, 2)), 3)  # (the finish's: a budget's reserve holds no compiling)
     rgb, zero = np.ones((4, 3)), np.zeros(4)  # the finish's caustic estimate, as `caustics`
     spread = spread_sparse(rgb, zero, np.ones(4), 2, 2)
-    held_move(CausticStats(2, 2, 1, rgb, rgb, zero, zero, rgb, zero, *spread, zero, zero, rgb,
-                           rgb), rgb, 0.0)  # fmt: skip
+    held_move(CausticStats(2, 2, 1, rgb, rgb, zero, zero, rgb, zero, *spread, zero, zero, zero,
+                           rgb, rgb), rgb, 0.0)  # fmt: skip
 
 
 def warm_later_kernels(
@@ -375,7 +385,7 @@ def extrapolated_move(stats: CausticStats) -> np.ndarray:
     pixels), or zeros (a move the blend gives no weight) without EXTRAPOLATED_MOVE."""
     if not EXTRAPOLATED_MOVE:
         return np.zeros((len(stats.spread), 3))
-    return held_move(stats, extrapolated(stats.wide, stats.narrow), 0.0)
+    return held_move(stats, extrapolated(stats.wide, stats.narrow, stats.blur_ratio), 0.0)
 
 
 def spread_sparse(
@@ -522,6 +532,8 @@ class Passes:
         self.full = o.component == "full"
         self.state = PPMState.start(self.pixels, o.radius or 1.0, ALPHA)  # radii: first pass
         self.narrow = PPMState.start(self.pixels, 1.0, ALPHA)  # the same at NARROW × its radii
+        # Σ radius² over the passes of each (wide, narrow): the ratio of their blurs
+        self.blur = np.zeros((2, self.pixels))
         # what each pass gathered alone, in two halves of the passes (`blend`)
         self.halves = PassHalves.start(2, self.pixels)
         self.paths = Halves(self.h, self.w)
@@ -701,6 +713,8 @@ class Passes:
         if photons is not None:
             states = (state, self.narrow)
             self.halves.mark(states)
+            self.blur[0] += state.radius**2
+            self.blur[1] += self.narrow.radius**2
             sppm_gather(states, points, photons, watch)
             self.halves.add(j % 2, states, photons.n_paths)
 
@@ -937,8 +951,18 @@ class Passes:
         return CausticStats(
             self.h, self.w, passes, s.irradiance(), n.irradiance(), s.count, n.count, own,
             count, *spread_sparse(own, count, overlap, self.h, self.w), s.radius / fp,
+            self.blur_ratio(),
             np.log(fp / np.median(fp)), *(g.reshape(-1, 3) for g in self.guides()),
         )  # fmt: skip
+
+    def blur_ratio(self) -> np.ndarray:
+        """(P,) float64 the narrow kernel's blur over the wide one's per pixel: Σ radius² over
+        the passes of each (SPPM's estimate is the mean of its passes' estimates at their
+        radii), FIRST_BLUR_RATIO before any pass or without PIXEL_BLUR_RATIO."""
+        wide, narrow = self.blur
+        if not PIXEL_BLUR_RATIO:
+            return np.full(self.pixels, FIRST_BLUR_RATIO)
+        return np.where(wide > 0, narrow / np.where(wide > 0, wide, 1.0), FIRST_BLUR_RATIO)
 
     def caustics(self) -> tuple[np.ndarray, np.ndarray]:
         """(P, 3) float64 caustic radiance per pixel, SPPM's at the sharper of two radii where
@@ -967,13 +991,16 @@ class Passes:
             if w > 0:  # (a move not taken leaves no NaN of its own behind: 0·NaN)
                 out += w * x
         # The two kernels' photons tell the caustic's error too. The moves make the estimate
-        # (1 - b)·wide + b·narrow, b = w_n + 4/3·w_e (at a pixel Lepski's rule took narrow:
-        # 1 + w_e/3); the narrow disc's photons are among the wide one's, so their errors
-        # correlate (covariance about the wide one's variance) and its relative variance is
-        # (1 - b²)/N_wide + b²/N_narrow, where a move moved the pixel (not where it is sparse).
-        ext = EXTRAPOLATION * weights[1]
+        # (1 - b)·wide + b·narrow, b = w_n + f·w_e, f the pixel's `extrapolation` (about 4/3;
+        # at a pixel Lepski's rule took narrow: 1 + (f - 1)·w_e); the narrow disc's photons
+        # are among the wide one's, so their errors correlate (covariance about the wide
+        # one's variance) and its relative variance is (1 - b²)/N_wide + b²/N_narrow, where
+        # a move moved the pixel (not where it is sparse).
+        ext = extrapolation(stats.blur_ratio) * weights[1]
         b = np.where(sharp, 1.0 + ext - weights[1], weights[0] + ext)
-        moved = (moves[0].any(axis=1) & (weights[0] > 0)) | (moves[1].any(axis=1) & (ext > 0))
+        moved = (moves[0].any(axis=1) & (weights[0] > 0)) | (
+            moves[1].any(axis=1) & (weights[1] > 0)
+        )
         wide_count = np.maximum(stats.wide_count, 1.0)
         narrow_count = np.maximum(stats.narrow_count, 1.0)
         effective = 1.0 / ((1 - b * b) / wide_count + b * b / narrow_count)
@@ -1005,7 +1032,7 @@ class Passes:
         a = self.caustic_stats(half=0)
         wide, narrow = (half_state(self.halves, 1, k, like).irradiance()
                         for k, like in enumerate((self.state, self.narrow)))  # fmt: skip
-        target = extrapolated(wide, narrow) if EXTRAPOLATED_TARGET else narrow
+        target = extrapolated(wide, narrow, a.blur_ratio) if EXTRAPOLATED_TARGET else narrow
         moves = [held_move(a, a.narrow, 0.0), extrapolated_move(a)]
         if network:
             moves.append(held_move(a, caustic_forward.filter_caustics(self.filter, a), CLAMP_Z))
