@@ -6,7 +6,8 @@ set to choose on), inside `auto --component caustic`.
 
 `Passes.blend` fits the weights of its moves (towards the narrow kernel's estimate and, with
 the network, the filter's) to one half of the passes' estimate, computed from the other half.
-The narrow estimate has a quarter of the wide one's blur; the extrapolated one
+The narrow estimate has about a quarter of the wide one's blur (a ratio per pixel,
+`Passes.blur_ratio`: 1/4 at the first pass, up to about 2/5 later); the extrapolated one
 (`dpm.caustic.stats.extrapolated`) cancels it to second order at more noise, which the fit
 averages over the pixels. `--switch target`: the blend fitted to the narrow or the
 extrapolated estimate (`auto.EXTRAPOLATED_TARGET`), without the move towards the latter;

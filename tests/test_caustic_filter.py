@@ -306,6 +306,27 @@ def test_the_halves_hold_what_each_pass_gathered_alone() -> None:
     half = half_state(halves, 1, 0, states[0])
     assert np.allclose(half.irradiance(), want[1, 0] / 300)
     assert np.array_equal(half.radius, states[0].radius)
+    # and the whole run's estimate is the mean of its passes' own (the rescalings telescope),
+    # so its blur is that of the passes' mean radius² (`Passes.blur_ratio`)
+    for k, s in enumerate(states):
+        assert np.allclose(s.irradiance(), want[:, k].sum(axis=0) / 700, rtol=1e-9)
+
+
+def test_the_blur_ratio_is_a_quarter_at_the_first_pass_then_each_pixels_own(glass) -> None:
+    c = glass.camera
+    o = RenderOptions(component="caustic", spp=8, photons=8 * 4 * c.width * c.height, seed=1,
+                      network=False, progress=False)  # fmt: skip
+    run = Passes(Auto(glass, o), build_bvh(glass), c, Stopwatch(), 0.0)
+    run.run_pass()
+    assert np.allclose(run.blur_ratio(), NARROW**2)  # the narrow radius is half the wide
+    for _ in range(7):
+        run.run_pass()
+    q, halves = run.blur_ratio(), (run.blur_ratio(0), run.blur_ratio(1))
+    # each radius shrinks with its own photons, the narrow one's mostly more slowly
+    assert np.median(q) >= NARROW**2 - 1e-12 and q.max() > NARROW**2 + 0.02 and q.min() > 0.2
+    wide, narrow = run.blur[:, 0], run.blur[:, 1]  # (halves, P) Σ radius² of each kernel
+    assert np.allclose(q, narrow.sum(0) / wide.sum(0))
+    assert all(np.allclose(h, narrow[i] / wide[i]) for i, h in enumerate(halves))
 
 
 def weights_of(scene, passes: int, filtered, monkeypatch) -> np.ndarray:

@@ -532,8 +532,8 @@ class Passes:
         self.full = o.component == "full"
         self.state = PPMState.start(self.pixels, o.radius or 1.0, ALPHA)  # radii: first pass
         self.narrow = PPMState.start(self.pixels, 1.0, ALPHA)  # the same at NARROW × its radii
-        # Σ radius² over the passes of each (wide, narrow): the ratio of their blurs
-        self.blur = np.zeros((2, self.pixels))
+        # Σ radius² over each half's passes of each kernel (wide, narrow): their blurs' ratio
+        self.blur = np.zeros((2, 2, self.pixels))
         # what each pass gathered alone, in two halves of the passes (`blend`)
         self.halves = PassHalves.start(2, self.pixels)
         self.paths = Halves(self.h, self.w)
@@ -713,8 +713,8 @@ class Passes:
         if photons is not None:
             states = (state, self.narrow)
             self.halves.mark(states)
-            self.blur[0] += state.radius**2
-            self.blur[1] += self.narrow.radius**2
+            self.blur[j % 2, 0] += state.radius**2  # (the radii this pass gathers with)
+            self.blur[j % 2, 1] += self.narrow.radius**2
             sppm_gather(states, points, photons, watch)
             self.halves.add(j % 2, states, photons.n_paths)
 
@@ -951,15 +951,16 @@ class Passes:
         return CausticStats(
             self.h, self.w, passes, s.irradiance(), n.irradiance(), s.count, n.count, own,
             count, *spread_sparse(own, count, overlap, self.h, self.w), s.radius / fp,
-            self.blur_ratio(),
+            self.blur_ratio(half),
             np.log(fp / np.median(fp)), *(g.reshape(-1, 3) for g in self.guides()),
         )  # fmt: skip
 
-    def blur_ratio(self) -> np.ndarray:
+    def blur_ratio(self, half: int | None = None) -> np.ndarray:
         """(P,) float64 the narrow kernel's blur over the wide one's per pixel: Σ radius² over
         the passes of each (SPPM's estimate is the mean of its passes' estimates at their
-        radii), FIRST_BLUR_RATIO before any pass or without PIXEL_BLUR_RATIO."""
-        wide, narrow = self.blur
+        radii; a half's, of its own passes'), FIRST_BLUR_RATIO before any pass or without
+        PIXEL_BLUR_RATIO."""
+        wide, narrow = self.blur.sum(axis=0) if half is None else self.blur[half]
         if not PIXEL_BLUR_RATIO:
             return np.full(self.pixels, FIRST_BLUR_RATIO)
         return np.where(wide > 0, narrow / np.where(wide > 0, wide, 1.0), FIRST_BLUR_RATIO)
@@ -1032,7 +1033,7 @@ class Passes:
         a = self.caustic_stats(half=0)
         wide, narrow = (half_state(self.halves, 1, k, like).irradiance()
                         for k, like in enumerate((self.state, self.narrow)))  # fmt: skip
-        target = extrapolated(wide, narrow, a.blur_ratio) if EXTRAPOLATED_TARGET else narrow
+        target = extrapolated(wide, narrow, self.blur_ratio(1)) if EXTRAPOLATED_TARGET else narrow
         moves = [held_move(a, a.narrow, 0.0), extrapolated_move(a)]
         if network:
             moves.append(held_move(a, caustic_forward.filter_caustics(self.filter, a), CLAMP_Z))
