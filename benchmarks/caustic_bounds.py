@@ -63,6 +63,11 @@ COLUMNS = ("filter", "variance share", "bias floor", "narrow floor", "extrapolat
 OTHERS = "others' mean"
 
 
+def _sharp(s: stats.CausticStats) -> np.ndarray:
+    """(P, 3) the extrapolated estimate of a run's statistics (blur cancelled to second order)."""
+    return stats.extrapolated(s.wide, s.narrow, s.blur_ratio)
+
+
 def scene_rows(name: str, which: str, passes: tuple[int, ...], seeds: list[int]) -> list[dict]:
     """Rows of the ratios above for one scene at each pass count."""
     obj, w, h = size(name, which)
@@ -84,9 +89,8 @@ def scene_rows(name: str, which: str, passes: tuple[int, ...], seeds: list[int])
         mse = float(((images - ref) ** 2).mean())
         share = variance / mse
         floors = []
-        sharp = lambda s: stats.extrapolated(s.wide, s.narrow, s.blur_ratio)  # noqa: E731
-        for of in (lambda s: s.narrow, sharp):
-            e = np.stack([of(s).reshape(h, w, 3) for s in runs])
+        for sharp in (False, True):
+            e = np.stack([(_sharp(s) if sharp else s.narrow).reshape(h, w, 3) for s in runs])
             bias2 = float(((e - ref) ** 2).mean()) - float(e.var(axis=0, ddof=1).mean())
             floors.append(np.sqrt(max(bias2, 0.0) / mse))
         filtered, others, held, oracle = [], [], [], []

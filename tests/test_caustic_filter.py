@@ -324,7 +324,8 @@ def test_the_blur_ratio_is_a_quarter_at_the_first_pass_then_each_pixels_own(glas
     q, halves = run.blur_ratio(), (run.blur_ratio(0), run.blur_ratio(1))
     # each radius shrinks with its own photons, the narrow one's mostly more slowly
     assert np.median(q) >= NARROW**2 - 1e-12 and q.max() > NARROW**2 + 0.02 and q.min() > 0.2
-    wide, narrow = run.blur[:, 0], run.blur[:, 1]  # (halves, P) Σ radius² of each kernel
+    r2 = run.halves.radius2  # (halves, kernels, P) Σ radius² of each kernel's passes
+    wide, narrow = r2[:, 0], r2[:, 1]
     assert np.allclose(q, narrow.sum(0) / wide.sum(0))
     assert all(np.allclose(h, narrow[i] / wide[i]) for i, h in enumerate(halves))
 

@@ -48,6 +48,9 @@ class PassHalves:
     found: np.ndarray  # (2, K, P) float64 photons the half's passes found in the discs
     paths: np.ndarray  # (2,) int64 emitted photon paths of the half's passes
     passes: np.ndarray  # (2,) int64 passes in the half
+    # (2, K, P) float64 Σ R_j² over the half's passes: SPPM's estimate is the mean of its
+    # passes' estimates at their radii, so this tells each kernel's blur (`Passes.blur_ratio`)
+    radius2: np.ndarray
     # the states' radius R (K, P), τ (K, P, 3) and count (K, P) before the coming gather
     # (`mark`; kept in place: fresh copies each pass cost more than the sums)
     radius: np.ndarray
@@ -59,8 +62,8 @@ class PassHalves:
         """Empty sums for `kernels` states of `pixels` pixels."""
         k, p = kernels, pixels
         return cls(np.zeros((2, k, p, 3)), np.zeros((2, k, p)), np.zeros(2, np.int64),
-                   np.zeros(2, np.int64), np.zeros((k, p)), np.zeros((k, p, 3)),
-                   np.zeros((k, p)))  # fmt: skip
+                   np.zeros(2, np.int64), np.zeros((2, k, p)), np.zeros((k, p)),
+                   np.zeros((k, p, 3)), np.zeros((k, p)))  # fmt: skip
 
     def mark(self, states: Sequence[Any]) -> None:
         """Keep the statistics of PPM states (`dpm.estimators.ppm.PPMState`: radius, τ,
@@ -75,5 +78,6 @@ class PassHalves:
         for k, s in enumerate(states):
             _add_pass(self.flux[half, k], self.found[half, k], self.radius[k], self.tau[k],
                       self.count[k], s.radius, s.tau, s.count, s.alpha)  # fmt: skip
+            self.radius2[half, k] += self.radius[k] ** 2  # (the radii the pass gathered with)
         self.paths[half] += paths
         self.passes[half] += 1

@@ -532,8 +532,6 @@ class Passes:
         self.full = o.component == "full"
         self.state = PPMState.start(self.pixels, o.radius or 1.0, ALPHA)  # radii: first pass
         self.narrow = PPMState.start(self.pixels, 1.0, ALPHA)  # the same at NARROW × its radii
-        # Σ radius² over each half's passes of each kernel (wide, narrow): their blurs' ratio
-        self.blur = np.zeros((2, 2, self.pixels))
         # what each pass gathered alone, in two halves of the passes (`blend`)
         self.halves = PassHalves.start(2, self.pixels)
         self.paths = Halves(self.h, self.w)
@@ -713,8 +711,6 @@ class Passes:
         if photons is not None:
             states = (state, self.narrow)
             self.halves.mark(states)
-            self.blur[j % 2, 0] += state.radius**2  # (the radii this pass gathers with)
-            self.blur[j % 2, 1] += self.narrow.radius**2
             sppm_gather(states, points, photons, watch)
             self.halves.add(j % 2, states, photons.n_paths)
 
@@ -960,10 +956,12 @@ class Passes:
         the passes of each (SPPM's estimate is the mean of its passes' estimates at their
         radii; a half's, of its own passes'), FIRST_BLUR_RATIO before any pass or without
         PIXEL_BLUR_RATIO."""
-        wide, narrow = self.blur.sum(axis=0) if half is None else self.blur[half]
-        if not PIXEL_BLUR_RATIO:
-            return np.full(self.pixels, FIRST_BLUR_RATIO)
-        return np.where(wide > 0, narrow / np.where(wide > 0, wide, 1.0), FIRST_BLUR_RATIO)
+        r2 = self.halves.radius2
+        wide, narrow = r2.sum(axis=0) if half is None else r2[half]
+        ratio = np.full(self.pixels, FIRST_BLUR_RATIO)
+        if PIXEL_BLUR_RATIO:
+            np.divide(narrow, wide, out=ratio, where=wide > 0)
+        return ratio
 
     def caustics(self) -> tuple[np.ndarray, np.ndarray]:
         """(P, 3) float64 caustic radiance per pixel, SPPM's at the sharper of two radii where
