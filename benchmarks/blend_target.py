@@ -29,6 +29,7 @@ from dataclasses import replace
 import numpy as np
 from caustic_references import EXAMPLES, load_reference, size
 
+import dpm.caustic.stats as stats
 import dpm.methods.auto as auto
 from common import RESULTS, cpu, geomean, markdown_table
 from dpm import load_scene
@@ -38,14 +39,15 @@ from dpm.options import RenderOptions
 from dpm.renderer import render
 
 # the module flag of `dpm.methods.auto` each switch turns off and on
-SWITCHES = {"target": "EXTRAPOLATED_TARGET", "move": "EXTRAPOLATED_MOVE",
-            "ratio": "PIXEL_BLUR_RATIO"}  # fmt: skip
+SWITCHES = {"target": (auto, "EXTRAPOLATED_TARGET"), "move": (auto, "EXTRAPOLATED_MOVE"),
+            "ratio": (auto, "PIXEL_BLUR_RATIO"),
+            "centre": (stats, "EXTRAPOLATED_CENTRE")}  # fmt: skip
 
 
 def run(switch: str, passes: list[int], seeds: list[int], network: bool) -> list[dict]:
     """Per scene and pass count: RMSE with the switch off and the ratio with it on."""
     auto.EXTRAPOLATED_TARGET = True
-    auto.EXTRAPOLATED_MOVE = switch == "ratio"
+    auto.EXTRAPOLATED_MOVE = switch in ("ratio", "centre")
     auto.PIXEL_BLUR_RATIO = switch != "ratio"
     rows = []
     for name in EXAMPLES:
@@ -61,7 +63,7 @@ def run(switch: str, passes: list[int], seeds: list[int], network: bool) -> list
                                         height=h, seed=seed, progress=False,
                                         network=network)  # fmt: skip
                 for on in (False, True):
-                    setattr(auto, SWITCHES[switch], on)
+                    setattr(*SWITCHES[switch], on)
                     errors[on].append(rmse(render(scene, options).image, ref))
             off = float(np.mean(errors[False]))
             row = {"scene": name, "passes": p, "off": off,
@@ -74,7 +76,7 @@ def run(switch: str, passes: list[int], seeds: list[int], network: bool) -> list
 def main() -> None:
     """Run and write the table."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--switch", choices=("target", "move", "ratio"), default="target")
+    p.add_argument("--switch", choices=tuple(SWITCHES), default="target")
     p.add_argument("--passes", type=int, nargs="+", default=[4, 16, 64])
     p.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
     p.add_argument("--network", action="store_true", help="with the learned filter")
@@ -93,6 +95,7 @@ def main() -> None:
         "target": ("fitted to the other half's narrow estimate", "fitted to its extrapolated one"),
         "move": ("without the move towards the extrapolated estimate", "with it"),
         "ratio": ("extrapolated at the first pass's blur ratio 1/4", "at each pixel's own"),
+        "centre": ("the filter held around the pixel's own estimate", "around the extrapolated"),
     }[a.switch]
     lines = [
         f"# The halves' blend, `--switch {a.switch}`: example scenes",

@@ -22,7 +22,7 @@ statistics the filter reads), and against the scene's SPPM caustic reference
   matches the reference within noise, or where few seeds underestimate the variance);
 - `others' mean`: the mean of the other seeds' renders (the same bias, a fifth of the
   variance with six seeds), and that mean held within the clamp of each render
-  (`stats.clamp_to_own`): whether the clamp lets a low-variance estimate through;
+  (`stats.clamp_to_centre`): whether the clamp lets a low-variance estimate through;
 - `reference held`: the reference itself held within the clamp (what a filter that
   predicted the reference would score);
 - `3 x 3 box`: the render's image averaged over 3 x 3 pixels, and the share of its noise
@@ -98,8 +98,8 @@ def scene_rows(name: str, which: str, passes: tuple[int, ...], seeds: list[int])
             filtered.append(rmse(forward.filter_caustics(weights, s).reshape(h, w, 3), ref))
             other = (images.sum(axis=0) - x) / (n - 1)
             others.append(rmse(other, ref))
-            held.append(rmse(stats.clamp_to_own(s, other.reshape(-1, 3)).reshape(h, w, 3), ref))
-            oracle.append(rmse(stats.clamp_to_own(s, ref.reshape(-1, 3)).reshape(h, w, 3), ref))
+            held.append(rmse(stats.clamp_to_centre(s, other.reshape(-1, 3)).reshape(h, w, 3), ref))
+            oracle.append(rmse(stats.clamp_to_centre(s, ref.reshape(-1, 3)).reshape(h, w, 3), ref))
         box = [rmse(uniform_filter(x, (3, 3, 1), mode="nearest"), ref) for x in images]
         left = uniform_filter(images - mean, (1, 3, 3, 1), mode="nearest").var(axis=0, ddof=1)
         values = (np.mean(filtered) / plain, share, np.sqrt(max(1.0 - share, 0.0)), *floors,

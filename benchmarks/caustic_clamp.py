@@ -56,7 +56,7 @@ def run(passes: list[int], seeds: list[int], zs: list[float]) -> list[dict]:
                         stats.CLAMP_Z = z
                         out = forward.filter_caustics(weights, s).reshape(h, w, 3)
                         errors[p][z].append(rmse(out, ref))
-                        held = stats.clamp_to_own(s, ref.reshape(-1, 3).astype(np.float64))
+                        held = stats.clamp_to_centre(s, ref.reshape(-1, 3).astype(np.float64))
                         errors[p][-z].append(rmse(held.reshape(h, w, 3), ref))  # the oracle
             for p in passes:
                 plain = float(np.mean(errors[p]["plain"]))

@@ -21,7 +21,8 @@ example scene (default the ring; its caustic photons of M emitted paths, seed 0)
   the network: what XLA's dots reach on this architecture's shapes here.
 Prints `fraction of peak: X` (the worst of the four) and writes
 benchmarks/results/inference.md (or --out); `--quick` (CI) runs 4,096 points once and writes
-nothing.
+nothing: a smoke test whose fraction (0.41-0.47 where the full run gives 0.64-0.72, Zen 4)
+counts start-up costs, so it is labelled as such and is not the issue's figure.
 
 The fused kernel is compiled for the vector width of Numba's target (`fused.LANES`: 16
 floats with AVX-512, else 8), named in the table. To measure AVX2 code on an AVX-512 host, run
@@ -257,7 +258,11 @@ def main() -> None:
     alone = layers_alone(params, points[0] * KS[0], max(rounds, 3))
     lines = report(rows, peak, source, alone, args.scene)
     print("\n".join(lines))
-    print(f"fraction of peak: {min(r['gflops'] for r in rows) / peak:.2f}")
+    fraction = min(r["gflops"] for r in rows) / peak
+    if args.quick:  # one small run: start-up costs weigh in, so not the figure
+        print(f"fraction of peak (--quick: a smoke test, not the measure): {fraction:.2f}")
+    else:
+        print(f"fraction of peak: {fraction:.2f}")
     if not args.quick:
         settings = [f"{k}={os.environ[k]}" for k in TARGET_VARIABLES if k in os.environ]
         command = " ".join([*settings, "python", "benchmarks/inference.py", *sys.argv[1:]])

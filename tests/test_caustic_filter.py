@@ -24,8 +24,10 @@ from dpm.caustic.halves import PassHalves
 from dpm.caustic.stats import (
     CLAMP_Z,
     DILATIONS,
+    EXTRAPOLATED_CENTRE,
     CausticStats,
     candidates,
+    clamp_centre,
     extrapolated,
     features,
 )  # fmt: skip
@@ -67,15 +69,17 @@ def random_network(tmp_path: Path, scale: float, seed: int = 1) -> tuple[Caustic
 
 
 def moves(weights, s: CausticStats) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(P, 3) the filter's output, how far it moved each channel from the pixel's own
-    estimate, and CLAMP_Z standard errors there: 1/√photons of the larger of the own and the
-    network's (unclamped) value, or the smaller of that value and one photon's."""
+    """(P, 3) the filter's output, how far it moved each channel from the estimate it is held
+    around (`clamp_centre`), and CLAMP_Z standard errors there: 1/√photons of the larger of
+    that estimate and the network's (unclamped) value, or the smaller of that value and one
+    photon's."""
     raw = caustic_forward.kernel_output(weights, features(s), candidates(s)).reshape(-1, 3)
     out = caustic_forward.filter_caustics(weights, s)
-    n = s.own_count[:, None]
-    se = np.where(n > 0, np.maximum(s.own, raw) / np.sqrt(np.maximum(n, 1)),
+    centre, count = clamp_centre(s)
+    n = count[:, None]
+    se = np.where(n > 0, np.maximum(centre, raw) / np.sqrt(np.maximum(n, 1)),
                   np.minimum(raw, s.photon_value()))  # fmt: skip
-    return out, np.abs(out - s.own), CLAMP_Z * se
+    return out, np.abs(out - centre), CLAMP_Z * se
 
 
 @pytest.fixture(scope="module")
@@ -88,12 +92,13 @@ def test_the_renders_numba_filter_equals_the_jax_network(glass_stats, tmp_path) 
     s = glass_stats
     model, params, path = random_network(tmp_path, 0.3)
     ours = caustic_forward.filter_caustics(caustic_forward.load_filter(path), s)
-    own = jnp.asarray(s.own.reshape(s.h, s.w, 3), jnp.float32)
-    count = jnp.asarray(s.own_count.reshape(s.h, s.w), jnp.float32)
+    centre, n = clamp_centre(s)  # as the training set stores them
+    own = jnp.asarray(centre.reshape(s.h, s.w, 3), jnp.float32)
+    count = jnp.asarray(n.reshape(s.h, s.w), jnp.float32)
     theirs = filter_caustics(model, params, jnp.asarray(features(s)), jnp.asarray(candidates(s)),
                              own, count, jnp.float32(s.photon_value()), CLAMP_Z)  # fmt: skip
     theirs = np.asarray(theirs).reshape(-1, 3)
-    assert np.abs(ours - s.own).max() > 1e-3 * np.abs(s.own).max()  # the network did move it
+    assert np.abs(ours - centre).max() > 1e-3 * np.abs(centre).max()  # the network did move it
     np.testing.assert_allclose(ours, theirs, rtol=1e-4, atol=1e-5 * np.abs(theirs).max())
 
 
@@ -112,11 +117,15 @@ def test_whatever_the_network_says_no_pixel_moves_past_its_error(glass_stats, tm
 def test_a_fresh_network_leaves_sppm_unchanged_within_noise(glass_stats, tmp_path) -> None:
     s = glass_stats
     _, _, path = random_network(tmp_path, 0.0)  # as `init` makes it
-    _, move, allowed = moves(caustic_forward.load_filter(path), s)
+    out, move, allowed = moves(caustic_forward.load_filter(path), s)
     lit = luminance(s.own) > 0
-    # within one standard error on average, and nowhere past the clamp
-    assert move[lit].mean() < (allowed[lit] / CLAMP_Z).mean()
-    assert (move <= allowed * (1 + 1e-6) + 1e-11).all()
+    # from the render's estimate without the network: within one of its standard errors on
+    # average (the clamp's centre, the extrapolated estimate, is itself further from it)
+    n = s.own_count[:, None]
+    se = np.where(n > 0, np.maximum(s.own, out) / np.sqrt(np.maximum(n, 1)),
+                  np.minimum(out, s.photon_value()))  # fmt: skip
+    assert np.abs(out - s.own)[lit].mean() < se[lit].mean()
+    assert (move <= allowed * (1 + 1e-6) + 1e-11).all()  # and nowhere past the clamp
 
 
 def test_with_the_network_the_error_falls_pass_after_pass(tmp_path) -> None:
@@ -377,13 +386,13 @@ def test_the_extrapolated_estimate_cancels_a_quadratic_blur() -> None:
 
 
 def test_the_filters_inputs_and_clamp_equal_their_numpy_formulas() -> None:
-    """`features`, `candidates` and `clamp_to_own` run in Numba, one pass over the pixels: the
+    """`features`, `candidates` and `clamp_to_centre` run in Numba, one pass over the pixels: the
     same values as their NumPy formulas (scipy's box means over the pixels inside the image;
     the clamp's share of the move from the pixel's own estimate), on random statistics with
     empty, sparse and dense discs."""
     from scipy.ndimage import uniform_filter
 
-    from dpm.caustic.stats import clamp_to_own
+    from dpm.caustic.stats import clamp_to_centre
 
     rng = np.random.default_rng(3)
     h, w = 13, 17
@@ -413,15 +422,24 @@ def test_the_filters_inputs_and_clamp_equal_their_numpy_formulas() -> None:
     want = np.stack([image, narrow.reshape(h, w, 3), *means, spread.reshape(h, w, 3),
                      sharp.reshape(h, w, 3)])  # fmt: skip
     np.testing.assert_allclose(candidates(s), np.maximum(want, 0), rtol=1e-6, atol=1e-12)
+    # the clamp's centre: the extrapolated estimate, its photons from the nested discs'
+    # relative variance (1 − f²)/N_wide + f²/N_narrow (none where either disc is empty)
+    f = 1 / (1 - np.minimum(s.blur_ratio, 0.5))
+    n_ext = np.where(count > 0, 1 / ((1 - f**2) / np.maximum(count, 1)
+                                     + f**2 / np.maximum(count / 3, 1)), 0.0)  # fmt: skip
+    centre, n = (np.maximum(sharp, 0), n_ext) if EXTRAPOLATED_CENTRE else (own, count)
+    got_centre, got_n = clamp_centre(s)
+    np.testing.assert_allclose(got_centre, centre, rtol=1e-12)
+    np.testing.assert_allclose(got_n, n, rtol=1e-12)
     filtered = own * rng.uniform(0.2, 3.0, (p, 3))
     photon = s.photon_value()
-    error = np.where(count[:, None] > 0,
-                     np.maximum(own, filtered) / np.sqrt(np.maximum(count, 1))[:, None],
+    error = np.where(n[:, None] > 0,
+                     np.maximum(centre, filtered) / np.sqrt(np.maximum(n, 1))[:, None],
                      np.minimum(filtered, photon))  # fmt: skip
     allowed = CLAMP_Z * error + 1e-12
-    keep = (allowed / np.maximum(np.abs(filtered - own) + 1e-12, allowed)).min(axis=1)
-    held = (1 - keep[:, None]) * own + keep[:, None] * filtered
-    np.testing.assert_allclose(clamp_to_own(s, filtered), held, rtol=1e-12)
+    keep = (allowed / np.maximum(np.abs(filtered - centre) + 1e-12, allowed)).min(axis=1)
+    held = (1 - keep[:, None]) * centre + keep[:, None] * filtered
+    np.testing.assert_allclose(clamp_to_centre(s, filtered), held, rtol=1e-12)
     assert 0 < keep.min() < 1 and keep.max() == 1  # some moves held, some not
     for h, w in ((6, 1), (6, 2), (6, 3), (2, 9)):  # images narrower than the 9 × 9 window
         p, one = h * w, np.ones(h * w)

@@ -25,7 +25,7 @@ from dpm.caustic.stats import (
     TAPS,
     CausticStats,
     candidates,
-    clamp_to_own,
+    clamp_to_centre,
     features,
     tap_offsets,
 )  # fmt: skip
@@ -306,8 +306,9 @@ def warm() -> None:
 
 def filter_caustics(weights: FilterWeights, stats: CausticStats) -> np.ndarray:
     """(P, 3) float64 caustic radiance per pixel: the network's kernel over the candidate
-    estimates, held within CLAMP_Z standard errors of the pixel's own (`clamp_to_own`); the
-    pixel's own where the network's output is not finite (weights that overflow)."""
+    estimates, held within CLAMP_Z standard errors of the pixel's extrapolated estimate
+    (`clamp_to_centre`); the pixel's own where the network's output is not finite (weights
+    that overflow)."""
     filtered = kernel_output(weights, features(stats), candidates(stats)).reshape(-1, 3)
     filtered = np.where(np.isfinite(filtered).all(axis=1, keepdims=True), filtered, stats.own)
-    return clamp_to_own(stats, filtered)
+    return clamp_to_centre(stats, filtered)

@@ -28,7 +28,8 @@ CANDIDATES = ((0, 1, 5), (1, 1, 5), (2, 3, 5), (3, 9, 5), (4, 1, 1), (5, 1, 5))
 TAPS = sum(size * size for *_, size in CANDIDATES)  # kernel weights per pixel
 SPREAD = 4  # the candidate that is the render's caustic without the network
 DILATIONS = (1, 2, 4, 8)  # of the network's four 3 × 3 layers: it sees 31 × 31 pixels
-# Standard errors of the pixel's own estimate the filter may move it: 2 at render (chosen on
+# Standard errors of the clamp's centre (`clamp_centre`) the filter may move it from: 2 at
+# render (chosen, when the centre was the pixel's own estimate, on
 # the examples with the shipped weights, benchmarks/results/caustic_clamp.md: geometric mean
 # 0.851 of the render without the network over 1-64 passes, worst 0.972, against 0.869 and
 # 0.971 at 1, 0.847 and 1.003 at 3), and 2 in training (the shipped weights were trained
@@ -46,6 +47,9 @@ TINY = 1e-12  # radiance far below any caustic's, keeping the clamp's ratio fini
 # close for the difference to say anything (a factor of at most 2).
 FIRST_BLUR_RATIO = 0.25
 MAX_BLUR_RATIO = 0.5
+# What the filter's result is held around (`clamp_centre`): the pixel's own estimate, or the
+# extrapolated one (less blur, more noise, so a wider reach; both converge as passes grow)
+EXTRAPOLATED_CENTRE = True
 
 
 @dataclass
@@ -164,13 +168,28 @@ def centre_tap() -> int:
     return CANDIDATES[0][2] ** 2 // 2
 
 
-def clamp_to_own(s: CausticStats, filtered: np.ndarray) -> np.ndarray:
-    """(P, 3) float64: `filtered` (P, 3) moved back toward the pixel's own estimate until
-    every channel lies within CLAMP_Z standard errors of the own one's (`_clamp`), so as passes
-    add photons the result converges to the own (consistent) estimate whatever the network
-    says, colour included."""
+def clamp_centre(s: CausticStats) -> tuple[np.ndarray, np.ndarray]:
+    """((P, 3) radiance, (P,) photons behind it) the filter's result is held around: the
+    pixel's own estimate, or with EXTRAPOLATED_CENTRE the extrapolated one, whose relative
+    variance (nested discs, weight f of the narrow one) is (1 − f²)/N_wide + f²/N_narrow, so
+    its photons are the inverse (none where the narrow disc holds none)."""
+    if not EXTRAPOLATED_CENTRE:
+        return s.own, s.own_count
+    f = extrapolation(s.blur_ratio)
+    held = (s.narrow_count > 0) & (s.wide_count > 0)
+    nw, nn = np.maximum(s.wide_count, 1.0), np.maximum(s.narrow_count, 1.0)
+    count = np.where(held, 1.0 / ((1 - f * f) / nw + f * f / nn), 0.0)
+    return extrapolated(s.wide, s.narrow, s.blur_ratio), count
+
+
+def clamp_to_centre(s: CausticStats, filtered: np.ndarray) -> np.ndarray:
+    """(P, 3) float64: `filtered` (P, 3) moved back toward the pixel's own estimate
+    (`clamp_centre`) until every channel lies within CLAMP_Z standard errors of it (`_clamp`),
+    so as passes add photons the result converges to a consistent estimate whatever the
+    network says, colour included."""
+    centre, count = clamp_centre(s)
     out = np.empty((len(s.own), 3))
-    _clamp(f64(s.own), f64(filtered), f64(s.own_count), s.photon_value(), CLAMP_Z, out)
+    _clamp(f64(centre), f64(filtered), f64(count), s.photon_value(), CLAMP_Z, out)
     return out  # a sum of non-negatives
 
 

@@ -2,7 +2,8 @@
 caustic statistics at a ladder of pass counts and an independent long render as the target.
 
 A shard holds, for each pass count P of `passes`, what `dpm.caustic.stats` makes of the
-render after P passes (`P/features`, `P/candidates`, `P/own`, `P/count`, `P/photon`), and
+render after P passes (`P/features`, `P/candidates`, `P/own` and `P/count`: the estimate the
+filter is held around and its photons, `clamp_centre`; `P/photon`), and
 `target`: the extrapolated estimate (`dpm.caustic.stats.extrapolated`, SPPM's blur cancelled
 to second order) of a render of `target_passes` passes with another seed. The target is
 noisy, but its noise is independent of the inputs', so an L2 loss against it has the same
@@ -60,7 +61,7 @@ def make_caustic_shard(config: DataConfig, index: int, threads: int | None = Non
     all); returns its manifest entry and its files, {path relative to `out`: bytes}."""
     import numba
 
-    from dpm.caustic.stats import candidates, extrapolated, features
+    from dpm.caustic.stats import candidates, clamp_centre, extrapolated, features
     from dpm.data.dataset import npz_bytes, scene_files, shard_name
     from dpm.tracer import build_bvh
 
@@ -74,8 +75,9 @@ def make_caustic_shard(config: DataConfig, index: int, threads: int | None = Non
     for p, s in zip(ladder, caustic_ladder(scene, bvh, base + 1, ladder), strict=True):
         arrays[f"{p}/features"] = features(s)
         arrays[f"{p}/candidates"] = candidates(s)
-        arrays[f"{p}/own"] = s.own.reshape(s.h, s.w, 3).astype(np.float32)
-        arrays[f"{p}/count"] = s.own_count.reshape(s.h, s.w).astype(np.float32)
+        centre, count = clamp_centre(s)  # what the render holds the filter around
+        arrays[f"{p}/own"] = centre.reshape(s.h, s.w, 3).astype(np.float32)
+        arrays[f"{p}/count"] = count.reshape(s.h, s.w).astype(np.float32)
         arrays[f"{p}/photon"] = np.float32(s.photon_value())
     (target,) = caustic_ladder(scene, bvh, base + 2, (config.target_passes,))
     sharp = extrapolated(target.wide, target.narrow, target.blur_ratio)

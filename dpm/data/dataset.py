@@ -83,10 +83,12 @@ class DataConfig:
                 d.pop(key)
             d["budgets"] = list(self.budgets)
         else:  # what the shards hold depends on the filter's inputs too
-            from dpm.caustic.stats import CHANNELS, TAPS
+            from dpm.caustic.stats import CHANNELS, EXTRAPOLATED_CENTRE, TAPS
 
             d["passes"] = list(self.passes)
             d["format"] = [CHANNELS, TAPS, "extrapolated target", "pixel blur ratio"]
+            if EXTRAPOLATED_CENTRE:
+                d["format"].append("extrapolated centre")
             for key in ("budgets", "reference_paths", "reference_radius",
                         "reference_paths_per_pass"):  # fmt: skip
                 d.pop(key)

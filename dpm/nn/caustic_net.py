@@ -5,10 +5,10 @@ the pure function that applies it.
 The network reads `dpm.caustic.stats.features` (scale-free per-pixel statistics and
 guides) and gives TAPS logits per pixel: one per (candidate estimate, neighbour) of
 `stats.CANDIDATES`; their softmax weighs those estimates. The result is then held
-within a few standard errors of the pixel's own estimate (`clamp`), so whatever the network
-says, as passes add photons the filter's reach shrinks to nothing and the render converges to
-SPPM's. A fresh network's last layer is zero with the pixel's own wide estimate favoured, so
-it starts close to the identity.
+within a few standard errors of the pixel's extrapolated SPPM estimate (`clamp`, around
+`stats.clamp_centre`), so whatever the network says, as passes add photons the filter's reach
+shrinks to nothing and the render converges to SPPM's. A fresh network's last layer is zero
+with the pixel's own wide estimate favoured, so it starts close to the identity.
 
 Training runs this module under `jax.jit`; a render runs `dpm.caustic.forward`, a Numba
 copy of the same forward pass (tested equal), because importing JAX costs a 2-second render
@@ -88,9 +88,10 @@ def clamp(
     filtered: jnp.ndarray, own: jnp.ndarray, count: jnp.ndarray, photon: jnp.ndarray,
     z: float = TRAIN_CLAMP_Z,
 ) -> jnp.ndarray:  # fmt: skip
-    """(..., 3) `filtered` moved back toward `own` (..., 3) until every channel is within z
-    standard errors of it (as `dpm.caustic.stats.clamp_to_own`; count (...): photons behind
-    own, photon: one photon's luminance)."""
+    """(..., 3) `filtered` moved back toward `own` (..., 3), the estimate it is held around
+    (`dpm.caustic.stats.clamp_centre`), until every channel is within z standard errors of it
+    (as `dpm.caustic.stats.clamp_to_centre`; count (...): photons behind own, photon: one
+    photon's luminance)."""
     error = jnp.where(count[..., None] > 0,
                       jnp.maximum(own, filtered) / jnp.sqrt(jnp.maximum(count, 1.0))[..., None],
                       jnp.minimum(filtered, photon))  # fmt: skip
@@ -104,7 +105,7 @@ def filter_caustics(
     own: jnp.ndarray, count: jnp.ndarray, photon: jnp.ndarray, z: float = TRAIN_CLAMP_Z,
 ) -> jnp.ndarray:  # fmt: skip
     """(H, W, 3) filtered caustic radiance of one image: features (H, W, CHANNELS), candidates
-    (C, H, W, 3), own (H, W, 3) and count (H, W) the pixel's own estimate and its photons,
+    (C, H, W, 3), own (H, W, 3) and count (H, W) the estimate it is held around and its photons,
     photon () one photon's luminance. Pure: jit and vmap it."""
     logits = model.apply(params, features)
     return clamp(apply_kernel(logits, candidates), own, count, photon, z)

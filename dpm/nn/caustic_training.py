@@ -90,7 +90,7 @@ def turn(image: np.ndarray, k: int, axis: int) -> np.ndarray:
 
 def caustic_estimates(model, z: float = TRAIN_CLAMP_Z) -> Callable:
     """estimates(params, batch) -> ((N, 3) the filter's radiance, held within z standard
-    errors of the pixel's own, (N, 3) the render's without the network: the spread candidate)
+    errors of the clamp's centre, (N, 3) the render's without the network: the spread candidate)
     over a CausticBatch's pixels, for `dpm.nn.train.make_steps`."""
     one = jax.vmap(
         lambda params, f, c, o, n, p: filter_caustics(model, params, f, c, o, n, p, z),

@@ -51,7 +51,7 @@ class TrainConfig:
     seed: int = 0
     loss: str = "mse+relmse"  # one of LOSSES ('mu-law' is the paper's Eq. 4): see dpm.nn.losses
     balance: bool = True  # divide each (scene, budget) part's loss by PM-K's: see dpm.nn.losses
-    # caustic filter only: standard errors of the pixel's own estimate the filter may move it
+    # caustic filter only: standard errors of the clamp's centre the filter may move it from
     # in training (the render holds it within dpm.caustic.stats.CLAMP_Z)
     clamp_z: float = 2.0
     # caustic filter only: turn each training image by a random symmetry of the square
