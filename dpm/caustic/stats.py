@@ -180,13 +180,20 @@ def clamp_centre(s: CausticStats) -> tuple[np.ndarray, np.ndarray]:
         return s.own, s.own_count
     f = extrapolation(s.blur_ratio)
     held = (s.narrow_count > 0) & (s.wide_count > 0)
-    nw, nn = np.maximum(s.wide_count, 1.0), np.maximum(s.narrow_count, 1.0)
-    count = np.where(held, 1.0 / ((1 - f * f) / nw + f * f / nn), 0.0)
+    count = np.where(held, nested_photons(s.wide_count, s.narrow_count, f), 0.0)
     return extrapolated(s.wide, s.narrow, s.blur_ratio), count
 
 
+def nested_photons(wide_count: np.ndarray, narrow_count: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(P,) photons the estimate (1 − b)·wide + b·narrow is worth, wide_count and narrow_count
+    (P,) the discs' photons (at least 1): the narrow disc's photons are among the wide one's,
+    so their errors correlate and its relative variance is (1 − b²)/N_wide + b²/N_narrow."""
+    nw, nn = np.maximum(wide_count, 1.0), np.maximum(narrow_count, 1.0)
+    return 1.0 / ((1 - b * b) / nw + b * b / nn)
+
+
 def clamp_to_centre(s: CausticStats, filtered: np.ndarray) -> np.ndarray:
-    """(P, 3) float64: `filtered` (P, 3) moved back toward the pixel's own estimate
+    """(P, 3) float64: `filtered` (P, 3) moved back toward the estimate it is held around
     (`clamp_centre`) until every channel lies within CLAMP_Z standard errors of it (`_clamp`),
     so as passes add photons the result converges to a consistent estimate whatever the
     network says, colour included."""

@@ -66,6 +66,7 @@ from dpm.caustic.stats import (
     extrapolated,
     extrapolation,
     f64,
+    nested_photons,
 )
 from dpm.denoise import denoise, guides, restore_certain
 from dpm.density.base import luminance
@@ -1000,9 +1001,7 @@ class Passes:
         moved = (moves[0].any(axis=1) & (weights[0] > 0)) | (
             moves[1].any(axis=1) & (weights[1] > 0)
         )
-        wide_count = np.maximum(stats.wide_count, 1.0)
-        narrow_count = np.maximum(stats.narrow_count, 1.0)
-        effective = 1.0 / ((1 - b * b) / wide_count + b * b / narrow_count)
+        effective = nested_photons(stats.wide_count, stats.narrow_count, b)
         return out, np.where(moved, effective, stats.own_count)
 
     def blend(self) -> np.ndarray:
