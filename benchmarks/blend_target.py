@@ -1,7 +1,7 @@
 """The halves' blend with and without the extrapolated estimate, on the example scenes (the
 set to choose on), inside `auto --component caustic`.
 
-    python benchmarks/blend_target.py [--switch target|move|ratio] [--passes 4 16 64]
+    python benchmarks/blend_target.py [--switch target|move|ratio|centre|hull] [--passes 4 16 64]
                                       [--seeds 1 2] [--network]
 
 `Passes.blend` fits the weights of its moves (towards the narrow kernel's estimate and, with
@@ -41,13 +41,13 @@ from dpm.renderer import render
 # the module flag of `dpm.methods.auto` each switch turns off and on
 SWITCHES = {"target": (auto, "EXTRAPOLATED_TARGET"), "move": (auto, "EXTRAPOLATED_MOVE"),
             "ratio": (auto, "PIXEL_BLUR_RATIO"),
-            "centre": (stats, "EXTRAPOLATED_CENTRE")}  # fmt: skip
+            "centre": (stats, "EXTRAPOLATED_CENTRE"), "hull": (stats, "HULL_CLAMP")}  # fmt: skip
 
 
 def run(switch: str, passes: list[int], seeds: list[int], network: bool) -> list[dict]:
     """Per scene and pass count: RMSE with the switch off and the ratio with it on."""
     auto.EXTRAPOLATED_TARGET = True
-    auto.EXTRAPOLATED_MOVE = switch in ("ratio", "centre")
+    auto.EXTRAPOLATED_MOVE = switch in ("ratio", "centre", "hull")
     auto.PIXEL_BLUR_RATIO = switch != "ratio"
     rows = []
     for name in EXAMPLES:
@@ -96,6 +96,7 @@ def main() -> None:
         "move": ("without the move towards the extrapolated estimate", "with it"),
         "ratio": ("extrapolated at the first pass's blur ratio 1/4", "at each pixel's own"),
         "centre": ("the filter held around the pixel's own estimate", "around the extrapolated"),
+        "hull": ("the filter held near the extrapolated estimate", "near it or the own one"),
     }[a.switch]
     lines = [
         f"# The halves' blend, `--switch {a.switch}`: example scenes",

@@ -25,6 +25,7 @@ from dpm.caustic.stats import (
     CLAMP_Z,
     DILATIONS,
     EXTRAPOLATED_CENTRE,
+    HULL_CLAMP,
     CausticStats,
     candidates,
     clamp_centre,
@@ -76,10 +77,18 @@ def moves(weights, s: CausticStats) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     raw = caustic_forward.kernel_output(weights, features(s), candidates(s)).reshape(-1, 3)
     out = caustic_forward.filter_caustics(weights, s)
     centre, count = clamp_centre(s)
-    n = count[:, None]
-    se = np.where(n > 0, np.maximum(centre, raw) / np.sqrt(np.maximum(n, 1)),
-                  np.minimum(raw, s.photon_value()))  # fmt: skip
-    return out, np.abs(out - centre), CLAMP_Z * se
+
+    def reach(m, n):
+        n = n[:, None]
+        return CLAMP_Z * np.where(n > 0, np.maximum(m, raw) / np.sqrt(np.maximum(n, 1)),
+                                  np.minimum(raw, s.photon_value()))  # fmt: skip
+
+    lo, hi = centre - reach(centre, count), centre + reach(centre, count)
+    if HULL_CLAMP:  # or of the pixel's own estimate
+        lo = np.minimum(lo, s.own - reach(s.own, s.own_count))
+        hi = np.maximum(hi, s.own + reach(s.own, s.own_count))
+    allowed = np.where(raw > centre, hi - centre, centre - lo)
+    return out, np.abs(out - centre), allowed
 
 
 @pytest.fixture(scope="module")
@@ -93,10 +102,14 @@ def test_the_renders_numba_filter_equals_the_jax_network(glass_stats, tmp_path) 
     model, params, path = random_network(tmp_path, 0.3)
     ours = caustic_forward.filter_caustics(caustic_forward.load_filter(path), s)
     centre, n = clamp_centre(s)  # as the training set stores them
-    own = jnp.asarray(centre.reshape(s.h, s.w, 3), jnp.float32)
-    count = jnp.asarray(n.reshape(s.h, s.w), jnp.float32)
+
+    def image(a: np.ndarray) -> jnp.ndarray:
+        return jnp.asarray(a.reshape(s.h, s.w, *a.shape[1:]), jnp.float32)
+
+    hull = (image(s.own), image(s.own_count)) if HULL_CLAMP else (None, None)
     theirs = filter_caustics(model, params, jnp.asarray(features(s)), jnp.asarray(candidates(s)),
-                             own, count, jnp.float32(s.photon_value()), CLAMP_Z)  # fmt: skip
+                             image(centre), image(n), jnp.float32(s.photon_value()), CLAMP_Z,
+                             *hull)  # fmt: skip
     theirs = np.asarray(theirs).reshape(-1, 3)
     assert np.abs(ours - centre).max() > 1e-3 * np.abs(centre).max()  # the network did move it
     np.testing.assert_allclose(ours, theirs, rtol=1e-4, atol=1e-5 * np.abs(theirs).max())
@@ -433,10 +446,17 @@ def test_the_filters_inputs_and_clamp_equal_their_numpy_formulas() -> None:
     np.testing.assert_allclose(got_n, n, rtol=1e-12)
     filtered = own * rng.uniform(0.2, 3.0, (p, 3))
     photon = s.photon_value()
-    error = np.where(n[:, None] > 0,
-                     np.maximum(centre, filtered) / np.sqrt(np.maximum(n, 1))[:, None],
-                     np.minimum(filtered, photon))  # fmt: skip
-    allowed = CLAMP_Z * error + 1e-12
+
+    def reach(m: np.ndarray, k: np.ndarray) -> np.ndarray:
+        return CLAMP_Z * np.where(k[:, None] > 0,
+                                  np.maximum(m, filtered) / np.sqrt(np.maximum(k, 1))[:, None],
+                                  np.minimum(filtered, photon))  # fmt: skip
+
+    # within CLAMP_Z standard errors of the centre or (HULL_CLAMP) of the pixel's own estimate
+    lo, hi = centre - reach(centre, n), centre + reach(centre, n)
+    if HULL_CLAMP:
+        lo, hi = np.minimum(lo, own - reach(own, count)), np.maximum(hi, own + reach(own, count))
+    allowed = np.where(filtered > centre, hi - centre, centre - lo) + 1e-12
     keep = (allowed / np.maximum(np.abs(filtered - centre) + 1e-12, allowed)).min(axis=1)
     held = (1 - keep[:, None]) * centre + keep[:, None] * filtered
     np.testing.assert_allclose(clamp_to_centre(s, filtered), held, rtol=1e-12)

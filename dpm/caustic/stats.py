@@ -53,6 +53,10 @@ MAX_BLUR_RATIO = 0.5
 # then trained around the own one): 0.979 / 0.982 / 0.988 of the own centre at 4 / 16 / 64
 # passes; the network is trained through the same centre (the set stores it)
 EXTRAPOLATED_CENTRE = True
+# With an extrapolated centre, the filter may also reach anywhere within CLAMP_Z standard
+# errors of the pixel's own estimate (the hull of the two intervals): both converge, and at
+# few passes the own one's reach is the wider where the narrow disc is nearly empty
+HULL_CLAMP = True
 
 
 @dataclass
@@ -194,34 +198,38 @@ def nested_photons(wide_count: np.ndarray, narrow_count: np.ndarray, b: np.ndarr
 
 def clamp_to_centre(s: CausticStats, filtered: np.ndarray) -> np.ndarray:
     """(P, 3) float64: `filtered` (P, 3) moved back toward the estimate it is held around
-    (`clamp_centre`) until every channel lies within CLAMP_Z standard errors of it (`_clamp`),
-    so as passes add photons the result converges to a consistent estimate whatever the
-    network says, colour included."""
+    (`clamp_centre`) until every channel lies within CLAMP_Z standard errors of it, or with
+    HULL_CLAMP of it or of the pixel's own estimate (`_clamp`), so as passes add photons the
+    result converges to a consistent estimate whatever the network says, colour included."""
     centre, count = clamp_centre(s)
+    other, other_count = (s.own, s.own_count) if HULL_CLAMP else (centre, count)
     out = np.empty((len(s.own), 3))
-    _clamp(f64(centre), f64(filtered), f64(count), s.photon_value(), CLAMP_Z, out)
+    _clamp(*map(f64, (centre, count, other, other_count, filtered)), s.photon_value(), CLAMP_Z,
+           out)  # fmt: skip
     return out  # a sum of non-negatives
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
 def _clamp(
-    own: np.ndarray, filtered: np.ndarray, count: np.ndarray, photon: float, z: float,
-    out: np.ndarray,
+    centre: np.ndarray, count: np.ndarray, other: np.ndarray, other_count: np.ndarray,
+    filtered: np.ndarray, photon: float, z: float, out: np.ndarray,
 ) -> None:  # fmt: skip
-    """out (P, 3) = own + keep·(filtered − own), keep the largest share of the move from own
-    (P, 3) to filtered (P, 3) that keeps each channel within z standard errors: 1/√count of
-    the larger of the two values where the disc holds count (P,) photons, else the smaller of
-    the filtered value and one photon's luminance `photon` (both shrink as passes add photons
-    and paths). One pass over the pixels (the NumPy form made a dozen (P, 3) temporaries)."""
-    for i in nb.prange(own.shape[0]):
+    """out (P, 3) = centre + keep·(filtered − centre), keep the largest share of the move from
+    centre (P, 3) to filtered (P, 3) that keeps each channel inside the hull of the intervals
+    z standard errors about centre and about other (P, 3; centre again for one interval): an
+    estimate's error is 1/√n of the larger of it and the filtered value where its disc holds
+    n photons (count, other_count (P,)), else the smaller of the filtered value and one
+    photon's luminance `photon` (all shrink as passes add photons and paths). One pass over
+    the pixels (the NumPy form made a dozen (P, 3) temporaries)."""
+    for i in nb.prange(centre.shape[0]):
         keep = np.inf
         for c in range(3):
-            o, f = own[i, c], filtered[i, c]
-            if count[i] > 0:
-                error = max(o, f) / np.sqrt(max(count[i], 1.0))
-            else:
-                error = min(f, photon)
-            allowed = z * error + TINY
+            o, f = centre[i, c], filtered[i, c]
+            lo, hi = o, o
+            for m, n in ((o, count[i]), (other[i, c], other_count[i])):
+                error = max(m, f) / np.sqrt(max(n, 1.0)) if n > 0 else min(f, photon)
+                lo, hi = min(lo, m - z * error), max(hi, m + z * error)
+            allowed = (hi - o if f > o else o - lo) + TINY
             keep = min(keep, allowed / max(abs(f - o) + TINY, allowed))
         for c in range(3):
-            out[i, c] = (1 - keep) * own[i, c] + keep * filtered[i, c]
+            out[i, c] = (1 - keep) * centre[i, c] + keep * filtered[i, c]

@@ -86,26 +86,39 @@ def apply_kernel(logits: jnp.ndarray, candidates: jnp.ndarray) -> jnp.ndarray:
 
 def clamp(
     filtered: jnp.ndarray, own: jnp.ndarray, count: jnp.ndarray, photon: jnp.ndarray,
-    z: float = TRAIN_CLAMP_Z,
+    z: float = TRAIN_CLAMP_Z, other: jnp.ndarray | None = None,
+    other_count: jnp.ndarray | None = None,
 ) -> jnp.ndarray:  # fmt: skip
     """(..., 3) `filtered` moved back toward `own` (..., 3), the estimate it is held around
-    (`dpm.caustic.stats.clamp_centre`), until every channel is within z standard errors of it
-    (as `dpm.caustic.stats.clamp_to_centre`; count (...): photons behind own, photon: one
-    photon's luminance)."""
-    error = jnp.where(count[..., None] > 0,
-                      jnp.maximum(own, filtered) / jnp.sqrt(jnp.maximum(count, 1.0))[..., None],
-                      jnp.minimum(filtered, photon))  # fmt: skip
-    allowed = z * error + TINY  # the share below is 1 within reach (no `where`: its
+    (`dpm.caustic.stats.clamp_centre`), until every channel is within z standard errors of it,
+    or with `other` (..., 3) and `other_count` (...) within the hull of that interval and the
+    one z standard errors about other (as `dpm.caustic.stats.clamp_to_centre`; count (...):
+    photons behind own, photon: one photon's luminance)."""
+
+    def error(m, n):
+        return jnp.where(n[..., None] > 0,
+                         jnp.maximum(m, filtered) / jnp.sqrt(jnp.maximum(n, 1.0))[..., None],
+                         jnp.minimum(filtered, photon))  # fmt: skip
+
+    reach = z * error(own, count)
+    lo, hi = own - reach, own + reach
+    if other is not None:
+        reach = z * error(other, other_count)
+        lo, hi = jnp.minimum(lo, other - reach), jnp.maximum(hi, other + reach)
+    allowed = jnp.where(filtered > own, hi - own, own - lo) + TINY  # the share below is 1
     keep = (allowed / jnp.maximum(jnp.abs(filtered - own) + TINY, allowed)).min(axis=-1)
-    return (1 - keep[..., None]) * own + keep[..., None] * filtered  # gradient is NaN)
+    return (1 - keep[..., None]) * own + keep[..., None] * filtered  # within reach (no
+    # `where` on the move: its gradient is NaN)
 
 
 def filter_caustics(
     model: nn.Module, params: dict, features: jnp.ndarray, candidates: jnp.ndarray,
     own: jnp.ndarray, count: jnp.ndarray, photon: jnp.ndarray, z: float = TRAIN_CLAMP_Z,
+    other: jnp.ndarray | None = None, other_count: jnp.ndarray | None = None,
 ) -> jnp.ndarray:  # fmt: skip
     """(H, W, 3) filtered caustic radiance of one image: features (H, W, CHANNELS), candidates
     (C, H, W, 3), own (H, W, 3) and count (H, W) the estimate it is held around and its photons,
-    photon () one photon's luminance. Pure: jit and vmap it."""
+    photon () one photon's luminance; other, other_count: the hull's second interval
+    (`clamp`; training leaves it out). Pure: jit and vmap it."""
     logits = model.apply(params, features)
-    return clamp(apply_kernel(logits, candidates), own, count, photon, z)
+    return clamp(apply_kernel(logits, candidates), own, count, photon, z, other, other_count)
