@@ -32,12 +32,14 @@ from dpm.caustic.stats import (
     extrapolated,
     features,
 )  # fmt: skip
+from dpm.data.caustic_set import pass_arrays
 from dpm.density.base import luminance
 from dpm.errors import InputError
 from dpm.estimators.ppm import PPMState
 from dpm.methods.auto import NARROW, Auto, Passes, half_state
 from dpm.metrics import rmse
 from dpm.nn.caustic_net import CausticNet, example_features, filter_caustics
+from dpm.nn.caustic_training import CausticBatch, caustic_estimates
 from dpm.nn.weights import Weights, save_weights
 from dpm.renderer import RenderOptions, render
 from dpm.stopwatch import Stopwatch
@@ -113,6 +115,22 @@ def test_the_renders_numba_filter_equals_the_jax_network(glass_stats, tmp_path) 
     theirs = np.asarray(theirs).reshape(-1, 3)
     assert np.abs(ours - centre).max() > 1e-3 * np.abs(centre).max()  # the network did move it
     np.testing.assert_allclose(ours, theirs, rtol=1e-4, atol=1e-5 * np.abs(theirs).max())
+
+
+def test_training_holds_the_filter_within_the_renders_intervals(glass_stats, tmp_path) -> None:
+    """The training set's arrays, through the training's estimate, give the render's filter:
+    the same clamp (HULL_CLAMP's second interval included), so weights are trained as used."""
+    s = glass_stats
+    model, params, path = random_network(tmp_path, 3.0)  # wild weights: the clamp binds
+    arrays = pass_arrays(s)
+    batch = CausticBatch(*(jnp.asarray(arrays[n])[None] for n in CausticBatch._fields))
+    estimates = caustic_estimates(model, CLAMP_Z)
+    trained = np.asarray(estimates(params, batch)[0])
+    rendered = caustic_forward.filter_caustics(caustic_forward.load_filter(path), s)
+    np.testing.assert_allclose(trained, rendered, rtol=1e-4, atol=1e-5 * np.abs(rendered).max())
+    one = batch._replace(other=batch.own, other_count=batch.count)  # one interval only
+    alone = np.asarray(estimates(params, one)[0])
+    assert (np.abs(alone - rendered).max() > 1e-3 * np.abs(rendered).max()) == HULL_CLAMP
 
 
 def test_whatever_the_network_says_no_pixel_moves_past_its_error(glass_stats, tmp_path) -> None:

@@ -3,7 +3,9 @@ caustic statistics at a ladder of pass counts and an independent long render as 
 
 A shard holds, for each pass count P of `passes`, what `dpm.caustic.stats` makes of the
 render after P passes (`P/features`, `P/candidates`, `P/own` and `P/count`: the estimate the
-filter is held around and its photons, `clamp_centre`; `P/photon`), and
+filter is held around and its photons, `clamp_centre`; `P/other` and `P/other_count`: the
+pixel's own estimate and its photons, the hull's second interval, `clamp_to_centre`;
+`P/photon`), and
 `target`: the extrapolated estimate (`dpm.caustic.stats.extrapolated`, SPPM's blur cancelled
 to second order) of a render of `target_passes` passes with another seed. The target is
 noisy, but its noise is independent of the inputs', so an L2 loss against it has the same
@@ -27,7 +29,8 @@ if TYPE_CHECKING:
     from dpm.scene import Scene
     from dpm.tracer import BVH
 
-PASS_ARRAYS = ("features", "candidates", "own", "count", "photon")  # `P/name` per pass count
+# `P/name` per pass count; `other`, `other_count`: the hull's second interval (stats.HULL_CLAMP)
+PASS_ARRAYS = ("features", "candidates", "own", "count", "other", "other_count", "photon")
 
 
 def caustic_ladder(
@@ -56,12 +59,28 @@ def caustic_ladder(
     return out
 
 
+def pass_arrays(s: CausticStats) -> dict[str, np.ndarray]:
+    """A shard's arrays for one pass count ({name: array} for PASS_ARRAYS, float32, images
+    h × w × ...): the filter's inputs and the two intervals the render holds it within."""
+    from dpm.caustic.stats import HULL_CLAMP, candidates, clamp_centre, features
+
+    centre, count = clamp_centre(s)  # what the render holds the filter around
+    other, other_count = (s.own, s.own_count) if HULL_CLAMP else (centre, count)
+    image, plane = (s.h, s.w, 3), (s.h, s.w)
+    return {"features": features(s), "candidates": candidates(s),
+            "own": centre.reshape(image).astype(np.float32),
+            "count": count.reshape(plane).astype(np.float32),
+            "other": other.reshape(image).astype(np.float32),
+            "other_count": other_count.reshape(plane).astype(np.float32),
+            "photon": np.float32(s.photon_value())}  # fmt: skip
+
+
 def make_caustic_shard(config: DataConfig, index: int, threads: int | None = None) -> tuple:
     """Make scene `index` and its caustic-filter shard on `threads` Numba threads (default:
     all); returns its manifest entry and its files, {path relative to `out`: bytes}."""
     import numba
 
-    from dpm.caustic.stats import candidates, clamp_centre, extrapolated, features
+    from dpm.caustic.stats import extrapolated
     from dpm.data.dataset import npz_bytes, scene_files, shard_name
     from dpm.tracer import build_bvh
 
@@ -73,12 +92,7 @@ def make_caustic_shard(config: DataConfig, index: int, threads: int | None = Non
     ladder = tuple(sorted(config.passes))
     arrays = {}
     for p, s in zip(ladder, caustic_ladder(scene, bvh, base + 1, ladder), strict=True):
-        arrays[f"{p}/features"] = features(s)
-        arrays[f"{p}/candidates"] = candidates(s)
-        centre, count = clamp_centre(s)  # what the render holds the filter around
-        arrays[f"{p}/own"] = centre.reshape(s.h, s.w, 3).astype(np.float32)
-        arrays[f"{p}/count"] = count.reshape(s.h, s.w).astype(np.float32)
-        arrays[f"{p}/photon"] = np.float32(s.photon_value())
+        arrays.update({f"{p}/{name}": a for name, a in pass_arrays(s).items()})
     (target,) = caustic_ladder(scene, bvh, base + 2, (config.target_passes,))
     sharp = extrapolated(target.wide, target.narrow, target.blur_ratio)
     arrays["target"] = sharp.reshape(target.h, target.w, 3).astype(np.float32)

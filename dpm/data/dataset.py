@@ -83,12 +83,14 @@ class DataConfig:
                 d.pop(key)
             d["budgets"] = list(self.budgets)
         else:  # what the shards hold depends on the filter's inputs too
-            from dpm.caustic.stats import CHANNELS, EXTRAPOLATED_CENTRE, TAPS
+            from dpm.caustic.stats import CHANNELS, EXTRAPOLATED_CENTRE, HULL_CLAMP, TAPS
 
             d["passes"] = list(self.passes)
             d["format"] = [CHANNELS, TAPS, "extrapolated target", "pixel blur ratio"]
             if EXTRAPOLATED_CENTRE:
                 d["format"].append("extrapolated centre")
+            if HULL_CLAMP:  # (the set stores the hull's second interval)
+                d["format"].append("hull clamp")
             for key in ("budgets", "reference_paths", "reference_radius",
                         "reference_paths_per_pass"):  # fmt: skip
                 d.pop(key)

@@ -34,6 +34,8 @@ class CausticBatch(NamedTuple):
     candidates: np.ndarray  # (B, C, H, W, 3) float32 candidate estimates
     own: np.ndarray  # (B, H, W, 3) float32 the estimate without the network
     count: np.ndarray  # (B, H, W) float32 photons behind `own`
+    other: np.ndarray  # (B, H, W, 3) float32 the hull's second estimate (the pixel's own)
+    other_count: np.ndarray  # (B, H, W) float32 photons behind `other`
     photon: np.ndarray  # (B,) float32 one photon's luminance
 
 
@@ -58,7 +60,7 @@ class CausticSampler:
         picks = range(size) if ordered else rng.integers(len(self.choices), size=size)
         rows = [self.choices[k] for k in picks]
         get = [(self.shards[i], p) for i, p in rows]
-        names = ("features", "candidates", "own", "count", "photon")
+        names = CausticBatch._fields
         turns = rng.integers(8, size=size) if self.augment and not ordered else None
         images = []
         for k, (s, p) in enumerate(get):
@@ -89,16 +91,19 @@ def turn(image: np.ndarray, k: int, axis: int) -> np.ndarray:
 
 
 def caustic_estimates(model, z: float = TRAIN_CLAMP_Z) -> Callable:
-    """estimates(params, batch) -> ((N, 3) the filter's radiance, held within z standard
-    errors of the clamp's centre, (N, 3) the render's without the network: the spread candidate)
-    over a CausticBatch's pixels, for `dpm.nn.train.make_steps`."""
+    """estimates(params, batch) -> ((N, 3) the filter's radiance, held within the hull of z
+    standard errors about the clamp's centre and about the pixel's own estimate, as the render
+    holds it, (N, 3) the render's without the network: the spread candidate) over a
+    CausticBatch's pixels, for `dpm.nn.train.make_steps`."""
     one = jax.vmap(
-        lambda params, f, c, o, n, p: filter_caustics(model, params, f, c, o, n, p, z),
-        (None, 0, 0, 0, 0, 0),
+        lambda params, f, c, o, n, a, m, p: filter_caustics(model, params, f, c, o, n, p, z, a, m),
+        (None, 0, 0, 0, 0, 0, 0, 0),
     )
 
     def estimates(params: dict, b: CausticBatch) -> tuple[jnp.ndarray, jnp.ndarray]:
-        out = one(params, b.features, b.candidates, b.own, b.count, b.photon)
+        out = one(
+            params, b.features, b.candidates, b.own, b.count, b.other, b.other_count, b.photon
+        )
         return out.reshape(-1, 3), b.candidates[:, SPREAD].reshape(-1, 3)
 
     return estimates
