@@ -306,8 +306,9 @@ def warm() -> None:
 
 def filter_caustics(weights: FilterWeights, stats: CausticStats) -> np.ndarray:
     """(P, 3) float64 caustic radiance per pixel: the network's kernel over the candidate
-    estimates, held within CLAMP_Z standard errors of the pixel's extrapolated estimate
-    (`clamp_to_centre`); the pixel's own where the network's output is not finite (weights
+    estimates, held within CLAMP_Z standard errors of the pixel's extrapolated estimate, or
+    with HULL_CLAMP within the hull of that interval and the one about the pixel's own
+    estimate (`clamp_to_centre`); the pixel's own where the network's output is not finite (weights
     that overflow)."""
     filtered = kernel_output(weights, features(stats), candidates(stats)).reshape(-1, 3)
     filtered = np.where(np.isfinite(filtered).all(axis=1, keepdims=True), filtered, stats.own)

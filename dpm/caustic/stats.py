@@ -28,7 +28,8 @@ CANDIDATES = ((0, 1, 5), (1, 1, 5), (2, 3, 5), (3, 9, 5), (4, 1, 1), (5, 1, 5))
 TAPS = sum(size * size for *_, size in CANDIDATES)  # kernel weights per pixel
 SPREAD = 4  # the candidate that is the render's caustic without the network
 DILATIONS = (1, 2, 4, 8)  # of the network's four 3 × 3 layers: it sees 31 × 31 pixels
-# Standard errors of the clamp's centre (`clamp_centre`) the filter may move it from: 2 at
+# Standard errors of the clamp's centre (`clamp_centre`) the filter may move it from (with
+# HULL_CLAMP, or of the pixel's own estimate, and anywhere between the two intervals): 2 at
 # render (chosen, when the centre was the pixel's own estimate, on
 # the examples with the shipped weights, benchmarks/results/caustic_clamp.md: geometric mean
 # 0.851 of the render without the network over 1-64 passes, worst 0.972, against 0.869 and
@@ -199,7 +200,8 @@ def nested_photons(wide_count: np.ndarray, narrow_count: np.ndarray, b: np.ndarr
 def clamp_to_centre(s: CausticStats, filtered: np.ndarray) -> np.ndarray:
     """(P, 3) float64: `filtered` (P, 3) moved back toward the estimate it is held around
     (`clamp_centre`) until every channel lies within CLAMP_Z standard errors of it, or with
-    HULL_CLAMP of it or of the pixel's own estimate (`_clamp`), so as passes add photons the
+    HULL_CLAMP within the hull of that interval and the one CLAMP_Z standard errors about the
+    pixel's own estimate (`_clamp`: between the two included), so as passes add photons the
     result converges to a consistent estimate whatever the network says, colour included."""
     centre, count = clamp_centre(s)
     other, other_count = (s.own, s.own_count) if HULL_CLAMP else (centre, count)

@@ -6,9 +6,11 @@ The network reads `dpm.caustic.stats.features` (scale-free per-pixel statistics 
 guides) and gives TAPS logits per pixel: one per (candidate estimate, neighbour) of
 `stats.CANDIDATES`; their softmax weighs those estimates. The result is then held
 within a few standard errors of the pixel's extrapolated SPPM estimate (`clamp`, around
-`stats.clamp_centre`), so whatever the network says, as passes add photons the filter's reach
-shrinks to nothing and the render converges to SPPM's. A fresh network's last layer is zero
-with the pixel's own wide estimate favoured, so it starts close to the identity.
+`stats.clamp_centre`), or of the hull of that interval and the one about the pixel's own
+estimate (`stats.HULL_CLAMP`, training and render alike), so whatever the network says,
+as passes add photons the filter's reach shrinks to nothing and the render converges to
+SPPM's. A fresh network's last layer is zero with the pixel's own wide estimate favoured, so
+it starts close to the identity.
 
 Training runs this module under `jax.jit`; a render runs `dpm.caustic.forward`, a Numba
 copy of the same forward pass (tested equal), because importing JAX costs a 2-second render
@@ -100,8 +102,11 @@ def clamp(
                          jnp.maximum(m, filtered) / jnp.sqrt(jnp.maximum(n, 1.0))[..., None],
                          jnp.minimum(filtered, photon))  # fmt: skip
 
+    if (other is None) != (other_count is None):
+        raise ValueError("clamp: pass other and other_count together, or neither")
     reach = z * error(own, count)
-    lo, hi = own - reach, own + reach
+    # (starting from own, as `dpm.caustic.stats._clamp` does: a negative reach allows no move)
+    lo, hi = jnp.minimum(own, own - reach), jnp.maximum(own, own + reach)
     if other is not None:
         reach = z * error(other, other_count)
         lo, hi = jnp.minimum(lo, other - reach), jnp.maximum(hi, other + reach)
@@ -119,6 +124,7 @@ def filter_caustics(
     """(H, W, 3) filtered caustic radiance of one image: features (H, W, CHANNELS), candidates
     (C, H, W, 3), own (H, W, 3) and count (H, W) the estimate it is held around and its photons,
     photon () one photon's luminance; other, other_count: the hull's second interval
-    (`clamp`; training leaves it out). Pure: jit and vmap it."""
+    (`clamp`; the render's HULL_CLAMP, which training stores as the shard's `P/other`).
+    Pure: jit and vmap it."""
     logits = model.apply(params, features)
     return clamp(apply_kernel(logits, candidates), own, count, photon, z, other, other_count)
