@@ -1,7 +1,7 @@
 """Caustic filter weights compared on the example scenes, inside `auto` (the set to choose on).
 
     python benchmarks/caustic_weights.py WEIGHTS [WEIGHTS ...] [--passes 1 4 16 64]
-                                         [--seeds 1 2] [--width 128]
+                                         [--seeds 1 2] [--out NAME.md]
 
 Each example scene's caustic component (`auto --component caustic`) is rendered in this
 process at each pass count and seed without the network and with each weight file
@@ -11,7 +11,7 @@ filter's effect alone). RMSE against the examples' SPPM caustic references
 (`caustic_references.py --set examples`), the mean over the seeds, over the render without
 the network; and the filter's seconds per pixel (`seconds.network` of the stats, which
 includes loading and the halves' second run). Weights are chosen here and reported on the
-unseen set (`caustic_network.py`). Writes results/caustic_weights.md.
+unseen set (`caustic_network.py`). Writes results/caustic_weights.md (or `--out`).
 """
 
 from __future__ import annotations
@@ -74,6 +74,7 @@ def main() -> None:
     p.add_argument("weights", nargs="+", type=Path)
     p.add_argument("--passes", type=int, nargs="+", default=[1, 4, 16, 64])
     p.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
+    p.add_argument("--out", default=TABLE.name, help="the table's name in results/")
     a = p.parse_args()
     start = time.monotonic()
     rows = run(a.weights, a.passes, a.seeds)
@@ -94,7 +95,8 @@ def main() -> None:
         "# Caustic filter weights on the example scenes, inside `auto`",
         "",
         f"`python benchmarks/caustic_weights.py {' '.join(names)} --passes "
-        f"{' '.join(map(str, a.passes))} --seeds {' '.join(map(str, a.seeds))}` on {cpu()}, "
+        f"{' '.join(map(str, a.passes))} --seeds {' '.join(map(str, a.seeds))}"
+        f"{'' if a.out == TABLE.name else f' --out {a.out}'}` on {cpu()}, "
         f"{datetime.date.today()}, {time.monotonic() - start:.0f} s: caustic RMSE with each "
         "weight file over `--no-network` (same seeds, same samples), against the examples' SPPM "
         "caustic references; the filter's seconds per pixel from the stats (the renders ran "
@@ -103,7 +105,7 @@ def main() -> None:
         *markdown_table(head, [*body, *summary]),
         "",
     ]
-    TABLE.write_text("\n".join(lines))
+    (RESULTS / a.out).write_text("\n".join(lines))
     print("\n".join(lines))
 
 

@@ -118,19 +118,22 @@ def test_the_renders_numba_filter_equals_the_jax_network(glass_stats, tmp_path) 
 
 
 def test_training_holds_the_filter_within_the_renders_intervals(glass_stats, tmp_path) -> None:
-    """The training set's arrays, through the training's estimate, give the render's filter:
-    the same clamp (HULL_CLAMP's second interval included), so weights are trained as used."""
+    """The training set's arrays, through the training's estimate with `[train] hull`, give
+    the render's filter: the same clamp, HULL_CLAMP's second interval included (without it,
+    the one interval about the centre the shipped weights were trained through)."""
     s = glass_stats
     model, params, path = random_network(tmp_path, 3.0)  # wild weights: the clamp binds
     arrays = pass_arrays(s)
     batch = CausticBatch(*(jnp.asarray(arrays[n])[None] for n in CausticBatch._fields))
-    estimates = caustic_estimates(model, CLAMP_Z)
+    estimates = caustic_estimates(model, CLAMP_Z, hull=True)  # ([train] hull = true)
     trained = np.asarray(estimates(params, batch)[0])
     rendered = caustic_forward.filter_caustics(caustic_forward.load_filter(path), s)
     np.testing.assert_allclose(trained, rendered, rtol=1e-4, atol=1e-5 * np.abs(rendered).max())
     one = batch._replace(other=batch.own, other_count=batch.count)  # one interval only
     alone = np.asarray(estimates(params, one)[0])
     assert (np.abs(alone - rendered).max() > 1e-3 * np.abs(rendered).max()) == HULL_CLAMP
+    unhulled = np.asarray(caustic_estimates(model, CLAMP_Z)(params, batch)[0])  # the default
+    np.testing.assert_allclose(unhulled, alone, rtol=1e-6, atol=1e-7 * np.abs(alone).max())
 
 
 def test_whatever_the_network_says_no_pixel_moves_past_its_error(glass_stats, tmp_path) -> None:

@@ -90,15 +90,17 @@ def turn(image: np.ndarray, k: int, axis: int) -> np.ndarray:
     return image
 
 
-def caustic_estimates(model, z: float = TRAIN_CLAMP_Z) -> Callable:
-    """estimates(params, batch) -> ((N, 3) the filter's radiance, held within the hull of z
-    standard errors about the clamp's centre and about the pixel's own estimate, as the render
-    holds it, (N, 3) the render's without the network: the spread candidate) over a
-    CausticBatch's pixels, for `dpm.nn.train.make_steps`."""
-    one = jax.vmap(
-        lambda params, f, c, o, n, a, m, p: filter_caustics(model, params, f, c, o, n, p, z, a, m),
-        (None, 0, 0, 0, 0, 0, 0, 0),
-    )
+def caustic_estimates(model, z: float = TRAIN_CLAMP_Z, hull: bool = False) -> Callable:
+    """estimates(params, batch) -> ((N, 3) the filter's radiance, held within z standard
+    errors of the clamp's centre, or with `hull` within the hull of that interval and the one
+    about the pixel's own estimate, as the render holds it (stats.HULL_CLAMP), (N, 3) the
+    render's without the network: the spread candidate) over a CausticBatch's pixels, for
+    `dpm.nn.train.make_steps`."""
+
+    def filtered(params, f, c, o, n, a, m, p):
+        return filter_caustics(model, params, f, c, o, n, p, z, *((a, m) if hull else ()))
+
+    one = jax.vmap(filtered, (None, 0, 0, 0, 0, 0, 0, 0))
 
     def estimates(params: dict, b: CausticBatch) -> tuple[jnp.ndarray, jnp.ndarray]:
         out = one(

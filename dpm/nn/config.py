@@ -56,6 +56,10 @@ class TrainConfig:
     clamp_z: float = 2.0
     # caustic filter only: turn each training image by a random symmetry of the square
     augment: bool = False
+    # caustic filter only: hold the move within the hull of clamp_z standard errors about the
+    # centre and about the pixel's own estimate, as the render does (stats.HULL_CLAMP); off in
+    # the shipped config: trained so, the weights did no better (docs/training.md)
+    hull: bool = False
     # the weights of the step with the least validation loss, not the last step's (the
     # held-out scenes are the training set's own, never the unseen-scene set)
     keep_best: bool = False

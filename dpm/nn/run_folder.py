@@ -32,8 +32,9 @@ def _identity(config: Config) -> dict:
         t.pop("balance")
     if t["clamp_z"] == 2.0 or config.model.architecture != "caustic":  # likewise; unused
         t.pop("clamp_z")
-    if not t["augment"]:  # likewise: off in every run from before it
-        t.pop("augment")
+    for key in ("augment", "hull"):  # likewise: off in every run from before them
+        if not t[key]:
+            t.pop(key)
     data = {**config.data.identity(), "scenes": config.data.scenes}  # fixes the split
     return {"data": data, "model": asdict(config.model), "train": t}
 

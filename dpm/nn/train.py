@@ -120,7 +120,7 @@ def train(config: Config, progress: bool = True) -> tuple[dict, list[dict]]:
     if nppm:
         estimates = shape_estimates(model)
     elif caustic:
-        estimates = caustic_estimates(model, t.clamp_z)
+        estimates = caustic_estimates(model, t.clamp_z, t.hull)
     optimiser, loss, step = make_steps(
         model, t.learning_rate, t.loss, t.balance, estimates, t.schedule, t.steps
     )
