@@ -1,7 +1,7 @@
 """Caustic filter weights compared on the example scenes, inside `auto` (the set to choose on).
 
     python benchmarks/caustic_weights.py WEIGHTS [WEIGHTS ...] [--passes 1 4 16 64]
-                                         [--seeds 1 2] [--out NAME.md]
+                                         [--seeds 1 2] [--out NAME]
 
 Each example scene's caustic component (`auto --component caustic`) is rendered in this
 process at each pass count and seed without the network and with each weight file
