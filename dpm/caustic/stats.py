@@ -197,6 +197,12 @@ def nested_photons(wide_count: np.ndarray, narrow_count: np.ndarray, b: np.ndarr
     return 1.0 / ((1 - b * b) / nw + b * b / nn)
 
 
+def clamp_other(s: CausticStats) -> tuple[np.ndarray, np.ndarray]:
+    """((P, 3) radiance, (P,) photons) the hull's second interval is about: the pixel's own
+    estimate with HULL_CLAMP, else the centre again (one interval)."""
+    return (s.own, s.own_count) if HULL_CLAMP else clamp_centre(s)
+
+
 def clamp_to_centre(s: CausticStats, filtered: np.ndarray) -> np.ndarray:
     """(P, 3) float64: `filtered` (P, 3) moved back toward the estimate it is held around
     (`clamp_centre`) until every channel lies within CLAMP_Z standard errors of it, or with
@@ -204,7 +210,7 @@ def clamp_to_centre(s: CausticStats, filtered: np.ndarray) -> np.ndarray:
     pixel's own estimate (`_clamp`: between the two included), so as passes add photons the
     result converges to a consistent estimate whatever the network says, colour included."""
     centre, count = clamp_centre(s)
-    other, other_count = (s.own, s.own_count) if HULL_CLAMP else (centre, count)
+    other, other_count = clamp_other(s)
     out = np.empty((len(s.own), 3))
     _clamp(*map(f64, (centre, count, other, other_count, filtered)), s.photon_value(), CLAMP_Z,
            out)  # fmt: skip

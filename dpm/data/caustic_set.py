@@ -62,10 +62,10 @@ def caustic_ladder(
 def pass_arrays(s: CausticStats) -> dict[str, np.ndarray]:
     """A shard's arrays for one pass count ({name: array} for PASS_ARRAYS, float32, images
     h × w × ...): the filter's inputs and the two intervals the render holds it within."""
-    from dpm.caustic.stats import HULL_CLAMP, candidates, clamp_centre, features
+    from dpm.caustic.stats import candidates, clamp_centre, clamp_other, features
 
     centre, count = clamp_centre(s)  # what the render holds the filter around
-    other, other_count = (s.own, s.own_count) if HULL_CLAMP else (centre, count)
+    other, other_count = clamp_other(s)
     image, plane = (s.h, s.w, 3), (s.h, s.w)
     return {"features": features(s), "candidates": candidates(s),
             "own": centre.reshape(image).astype(np.float32),
