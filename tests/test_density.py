@@ -8,6 +8,7 @@ import numba
 import numpy as np
 import pytest
 
+import dpm.tracer.photon_grid as photon_grid_module
 from conftest import water_between_lights
 from dpm import load_scene, stopwatch
 from dpm.density import gather
@@ -22,7 +23,7 @@ from dpm.methods.auto import AIMED_PHOTONS_PER_PIXEL, PHOTONS_PER_PIXEL, paths_p
 from dpm.metrics import rmse
 from dpm.stopwatch import Stopwatch
 from dpm.tracer import PhotonMap, VisiblePoints, build_bvh, trace_photons, trace_visible_points
-from dpm.tracer.photon_grid import grid_irradiance, photon_grid
+from dpm.tracer.photon_grid import disc_sums, grid_irradiance, photon_grid
 from dpm.tracer.photons import aimed_share
 
 EXAMPLES = Path(__file__).parent.parent / "examples" / "scenes"
@@ -404,3 +405,40 @@ def test_photon_grid_sums_the_photons_within_the_radius(radius: float) -> None:
     expected = counts @ photons.flux.astype(np.float64) / (np.pi * radius**2)
     np.testing.assert_allclose(out, expected, rtol=1e-12, atol=0)
     assert counts.sum() > 0 or radius < 0.01
+
+
+def test_disc_sums_are_the_point_grids_pairs_summed(monkeypatch) -> None:
+    """Each point's photons and flux within each of several radii, summed without storing a
+    pair, are those of the point grid's pairs (the same pairs, by the same arithmetic):
+    radii of one scale, a few far wider (summed apart, in grids of their own),
+    some zero; the same at one thread and, in smaller tasks, at two."""
+    rng = np.random.default_rng(7)
+    photons = plane_photons(5000, 8)
+    photons.normal[::4] = [0.0, 0.8, -0.6]  # a quarter face away
+    position = rng.uniform(-0.1, 1.1, (400, 3))
+    position[:300, 2] = rng.normal(0, 0.01, 300)  # near the plane, and some off it
+    normal = np.tile(np.float32([0, 0, 1]), (400, 1))
+    wide = rng.uniform(0.01, 0.08, 400)
+    wide[[5, 60, 200]] = (0.5, 2.0, 1e6)
+    wide[rng.random(400) < 0.1] = 0.0
+    radii = np.stack([wide, 0.6 * wide])
+    pairs = gather.PointIndex(position, normal).within(photons, wide)
+    flux = photons.flux[pairs.photon].astype(np.float64)
+    expected = []
+    for r in radii:
+        inside = pairs.distance < r[pairs.point]
+        count = np.bincount(pairs.point[inside], minlength=400)
+        sums = [np.bincount(pairs.point[inside], flux[inside, c], 400) for c in range(3)]
+        expected.append((count, np.stack(sums, 1)))
+    assert expected[1][0].sum() > 1000 and expected[0][0][200] > 0.5 * len(photons)
+    numba.set_num_threads(1)
+    try:
+        one = disc_sums(photons, position, normal, radii)
+    finally:
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    monkeypatch.setattr(photon_grid_module, "POINTS_PER_TASK", 3)
+    for found, summed in (one, disc_sums(photons, position, normal, radii)):
+        for k, (count, sums) in enumerate(expected):
+            np.testing.assert_array_equal(found[k], count)
+            np.testing.assert_allclose(summed[k], sums, rtol=1e-12, atol=1e-300)
+    np.testing.assert_array_equal(one[1], disc_sums(photons, position, normal, radii)[1])

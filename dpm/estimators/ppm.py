@@ -68,6 +68,12 @@ class PPMState(Statistics):
         n = len(self.radius)
         found = np.bincount(point, minlength=n).astype(np.float64)
         phi = np.stack([np.bincount(point, flux[:, c], minlength=n) for c in range(3)], 1)
+        self.add_sums(found, phi)
+
+    def add_sums(self, found: np.ndarray, phi: np.ndarray) -> None:
+        """Count a pass's photons found (n,) at each point, with summed per-path flux (n, 3);
+        shrink radii."""
+        n = len(self.radius)
         grown = self.count + self.alpha * found
         ratio = np.divide(grown, self.count + found, out=np.ones(n), where=found > 0)
         self.radius = self.radius * np.sqrt(ratio)
