@@ -8,7 +8,6 @@ import numba
 import numpy as np
 import pytest
 
-import dpm.tracer.photon_grid as photon_grid_module
 from conftest import water_between_lights
 from dpm import load_scene, stopwatch
 from dpm.density import gather
@@ -407,22 +406,28 @@ def test_photon_grid_sums_the_photons_within_the_radius(radius: float) -> None:
     assert counts.sum() > 0 or radius < 0.01
 
 
-def test_disc_sums_are_the_point_grids_pairs_summed(monkeypatch) -> None:
+@pytest.mark.parametrize("n_photons", [5000, 40])
+def test_disc_sums_are_the_point_grids_pairs_summed(n_photons: int) -> None:
     """Each point's photons and flux within each of several radii, summed without storing a
     pair, are those of the point grid's pairs (the same pairs, by the same arithmetic):
-    radii of one scale, a few far wider (summed apart, in grids of their own),
-    some zero; the same at one thread and, in smaller tasks, at two."""
+    radii of one scale up to the grid's widest (balls over 5 cells a side), a few far wider
+    (summed apart, in grids of their own), some zero in one state or both, the widest in
+    either state; the same at one thread and at two. With 40 photons (128 buckets) a ball's
+    cells share buckets, each of which must be read once."""
     rng = np.random.default_rng(7)
-    photons = plane_photons(5000, 8)
+    photons = plane_photons(n_photons, 8)
     photons.normal[::4] = [0.0, 0.8, -0.6]  # a quarter face away
     position = rng.uniform(-0.1, 1.1, (400, 3))
     position[:300, 2] = rng.normal(0, 0.01, 300)  # near the plane, and some off it
     normal = np.tile(np.float32([0, 0, 1]), (400, 1))
     wide = rng.uniform(0.01, 0.08, 400)
-    wide[[5, 60, 200]] = (0.5, 2.0, 1e6)
+    wide[:20] = 3.9 * np.median(wide)  # within the first grid (SPREAD × the median)
+    wide[[25, 60, 200]] = (0.5, 2.0, 1e6)
     wide[rng.random(400) < 0.1] = 0.0
-    radii = np.stack([wide, 0.6 * wide])
-    pairs = gather.PointIndex(position, normal).within(photons, wide)
+    other = wide * rng.uniform(0.3, 1.5, 400)  # wider than `wide` at some points
+    other[rng.random(400) < 0.1] = 0.0
+    radii = np.stack([wide, other])
+    pairs = gather.PointIndex(position, normal).within(photons, radii.max(axis=0))
     flux = photons.flux[pairs.photon].astype(np.float64)
     expected = []
     for r in radii:
@@ -430,15 +435,18 @@ def test_disc_sums_are_the_point_grids_pairs_summed(monkeypatch) -> None:
         count = np.bincount(pairs.point[inside], minlength=400)
         sums = [np.bincount(pairs.point[inside], flux[inside, c], 400) for c in range(3)]
         expected.append((count, np.stack(sums, 1)))
-    assert expected[1][0].sum() > 1000 and expected[0][0][200] > 0.5 * len(photons)
+    assert expected[0][0][200] > 0.5 * len(photons) and expected[1][0][:20].sum() > 0
+    assert (other > wide).any() and ((wide > 0) & (other == 0)).any()
+    if n_photons > 1000:
+        assert expected[1][0].sum() > 1000
     numba.set_num_threads(1)
     try:
         one = disc_sums(photons, position, normal, radii)
     finally:
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
-    monkeypatch.setattr(photon_grid_module, "POINTS_PER_TASK", 3)
-    for found, summed in (one, disc_sums(photons, position, normal, radii)):
+    two = disc_sums(photons, position, normal, radii)
+    for found, summed in (one, two):
         for k, (count, sums) in enumerate(expected):
             np.testing.assert_array_equal(found[k], count)
             np.testing.assert_allclose(summed[k], sums, rtol=1e-12, atol=1e-300)
-    np.testing.assert_array_equal(one[1], disc_sums(photons, position, normal, radii)[1])
+    np.testing.assert_array_equal(one[1], two[1])

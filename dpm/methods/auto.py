@@ -70,6 +70,7 @@ from dpm.caustic.stats import (
 )
 from dpm.denoise import denoise, guides, restore_certain
 from dpm.density.base import luminance
+from dpm.density.gather import PointIndex
 from dpm.density.progressive import pass_seed
 from dpm.errors import InputError
 from dpm.estimators.ppm import ALPHA, PPMState, check_progressive
@@ -283,8 +284,10 @@ def warm_first_kernels(scene: Scene, bvh: BVH, camera: Camera) -> None:
     states = (PPMState.start(4, 1.0, ALPHA), PPMState.start(4, 1.0, ALPHA))
     halves = PassHalves.start(2, 4)
     halves.mark(states)
-    sppm_gather(states, points, photons, Stopwatch())
+    sppm_gather(states, points, photons, Stopwatch())  # (photons to spare: `disc_sums`)
     halves.add(0, states, 256)
+    hit = points.hit  # the pairs, which a pass of few photons per pixel gathers through
+    PointIndex(points.position[hit], points.normal[hit]).within(photons, np.ones(hit.sum()))
     box_mean(np.zeros((2, 2)), 3)  # (the finish's: a budget's reserve holds no compiling)
     rgb, zero = np.ones((4, 3)), np.zeros(4)  # the finish's caustic estimate, as `caustics`
     spread = spread_sparse(rgb, zero, np.ones(4), 2, 2)

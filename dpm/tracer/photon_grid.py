@@ -1,5 +1,6 @@
 """A pass's caustic photons in a hashed uniform grid, for fixed-radius density estimates
-inside Numba kernels (the path tracer's diffuse vertices after the visible point).
+inside Numba kernels: the path tracer's diffuse vertices after the visible point
+(`grid_irradiance`), and SPPM's sums within each pixel's radii (`disc_sums`).
 
 Cells are cubes of side 2r, so the ball of radius r around a point meets at most 2×2×2 of
 them; cells hash into 2^k buckets (k: the least with 2^k ≥ 2·photons), a bucket's photons
@@ -138,7 +139,9 @@ def grid_irradiance(grid, px, py, pz, nx, ny, nz):
 
 # `disc_sums`' cells are cubes of side twice the median radius (a typical ball meets 2 × 2 × 2
 # of them), and points whose radius is over SPREAD times the median of those left are summed
-# apart, in a grid of cells sized for them (and so on): a ball then meets at most 6 × 6 × 6.
+# apart, in a grid of cells sized for them (and so on): a ball, at most 2 cells in radius,
+# then meets at most 5 cells a side (6 where rounding moves an edge). A block of more cells
+# than MAX_BALL_CELLS (rounding far from the origin) reads every bucket once instead.
 # (Cells of 1.5 or 1 median radius read fewer photons and more buckets: no faster.)
 SPREAD = 4.0
 MAX_BALL_CELLS = 216
@@ -187,20 +190,23 @@ def _disc_sums(grid, position, normal, radii, found, flux):
                 continue
             px, py, pz = position[i, 0], position[i, 1], position[i, 2]
             far = reach * reach * (1.0 + 1e-9)
-            m = 0  # the ball's distinct buckets (radius ≤ SPREAD cells: at most 6 per axis)
+            m = 0  # the ball's distinct buckets
             x0, y0, z0, cx, cy, cz = ball_cells(px, py, pz, reach, cell)
-            for a in range(cx):
+            every = cx * cy * cz > MAX_BALL_CELLS
+            for a in range(0 if every else cx):
                 for b in range(cy):
                     for c in range(cz):
                         h = bucket(x0 + a, y0 + b, z0 + c, mask)
                         seen = False
                         for e in range(m):
-                            seen = seen or buckets[e] == h
+                            if buckets[e] == h:
+                                seen = True
+                                break
                         if not seen:
                             buckets[m] = h
                             m += 1
-            for e in range(m):
-                h = buckets[e]
+            for e in range(mask + 1 if every else m):
+                h = e if every else buckets[e]
                 for row in range(grid.start[h], grid.start[h + 1]):
                     # as `point_grid._pairs`: float64 distance, float32 normals
                     dx = px - grid.position[row, 0]
