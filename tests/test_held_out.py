@@ -20,6 +20,7 @@ from dpm.density.gather import PointIndex
 from dpm.density.held_out import KEEP, LADDER, NARROWER, HeldOutState, block_ids, half
 from dpm.estimators import APPM, PPM
 from dpm.estimators.cppm import CPPM
+from dpm.estimators.ppm import PPMState
 from dpm.metrics import rmse
 from dpm.tracer import PhotonMap, VisiblePoints
 
@@ -95,6 +96,32 @@ def test_a_default_run_converges() -> None:
     ]
     assert errors[0] > errors[1] > errors[2], errors
     assert errors[2] < 0.05, errors
+
+
+@pytest.mark.parametrize("per_pass", [1, 2_000])
+def test_ppms_sums_point_by_point_are_its_pairs_summed(monkeypatch, per_pass: int) -> None:
+    # PPM's steps gather as per-point sums (`disc_sums`, no pair stored); forced through the
+    # pairs (as CPPM's steps are), the run is the same to rounding: radii, counts, flux, the
+    # steps dropped and the scale chosen. One-path passes leave a half with no photons.
+    points, photons = plane_points(16), striped_photons(20_000, seed=6)
+    index = PointIndex(points.position, points.normal)
+    radius = PPM().initial_radius(index, None, photons.split(2_000)[0])
+    runs = []
+    for sums in (True, False):
+        monkeypatch.setattr(PPMState, "SUMS", sums)
+        state = PPM().state(len(points), radius)
+        for part in photons.split(per_pass)[:40]:
+            state.add(index, part)
+        runs.append(state)
+    a, b = runs
+    assert (a.live, a.chosen(), a.passes, a.paths) == (b.live, b.chosen(), b.passes, b.paths)
+    for run_a, run_b in zip(a.runs, b.runs, strict=True):
+        for x, y in zip(run_a, run_b, strict=True):
+            assert (x.paths, x.passes, x.photons) == (y.paths, y.passes, y.photons)
+            np.testing.assert_array_equal(x.count, y.count)
+            np.testing.assert_allclose(x.radius, y.radius, rtol=1e-14)
+            np.testing.assert_allclose(x.tau, y.tau, rtol=1e-12, atol=1e-300)
+    assert a.irradiance().mean() > 0
 
 
 @pytest.mark.parametrize("cls", [PPM, APPM])

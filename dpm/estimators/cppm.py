@@ -47,6 +47,8 @@ CRITICAL = 14.067140449340167
 class CPPMState(PPMState):
     """PPM's per-point statistics (and its irradiance), with each disc's cell counts."""
 
+    SUMS: ClassVar[bool] = False  # reads the pairs (`add`)
+
     cells: np.ndarray  # (n, CELLS) float64 photons per cell since R last changed
 
     @classmethod

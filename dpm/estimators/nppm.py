@@ -72,6 +72,8 @@ def predictor(path: str) -> object:
 class NPPMState(PPMState):
     """PPM's per-point statistics, the photon moments of earlier passes and the network's file."""
 
+    SUMS: ClassVar[bool] = False  # reads the pairs (`add`)
+
     moments: np.ndarray  # (n, MOMENTS) float64, decayed as τ (dpm.density.shaped)
     weights: str = ""  # weight file of the network ('': the shipped one)
 

@@ -54,11 +54,25 @@ class PPMState(Statistics):
         nothing gathered."""
         return cls(start_radius(n, radius), np.zeros(n), np.zeros((n, 3)), alpha=alpha)
 
+    # PPM's statistics are counts and summed flux, which `disc_sums` gives point by point
+    # without storing pairs (`add_found`); subclasses that read the pairs themselves say False.
+    SUMS: ClassVar[bool] = True
+
     def add(self, index: PointIndex, photons: PhotonMap, watch: Stopwatch | None = None) -> None:
         """Gather one pass of photons (flux divided by its own n_paths) and shrink the radii."""
         pairs = index.within(photons, self.radius, watch)
         flux = photons.flux[pairs.photon].astype(np.float64) * photons.n_paths
         self.update(pairs.point, flux)
+        self.count_pass(photons)
+
+    def add_found(self, found: np.ndarray, flux: np.ndarray, photons: PhotonMap) -> None:
+        """Take one pass as per-point sums within the radii: photons found (n,) and their
+        summed flux (n, 3) (W, as stored: `disc_sums`); shrink the radii."""
+        self.add_sums(found, flux * photons.n_paths)
+        self.count_pass(photons)
+
+    def count_pass(self, photons: PhotonMap) -> None:
+        """Count one pass of photons in the run's counters."""
         self.paths += photons.n_paths
         self.passes += 1
         self.photons += len(photons)

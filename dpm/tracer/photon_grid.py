@@ -149,40 +149,50 @@ POINTS_PER_TASK = 64  # points of one parallel task (each task keeps its ball's 
 
 
 def disc_sums(
-    photons: PhotonMap, position: np.ndarray, normal: np.ndarray, radii: np.ndarray
+    photons: PhotonMap,
+    position: np.ndarray,
+    normal: np.ndarray,
+    radii: np.ndarray,
+    out: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(found, flux): (S, N) float64 photons and (S, N, 3) float64 their summed flux (W)
     within each of S radii (S, N) float64 (scene units; ≤ 0: none) of points (N, 3) with
     unit normals (N, 3) float32, normals agreeing. The pairs are those of
     `dpm.tracer.point_grid.grid_pairs` (the same arithmetic), none of them stored: each
-    point sums its photons in the grid's order, the same at any thread count."""
+    point sums its photons in the grid's order, the same at any thread count. `out`: arrays
+    of those shapes to write into (a caller gathering pass after pass keeps them: fresh
+    arrays of a million points' sums are hundreds of MB of new pages each pass)."""
     radii = np.ascontiguousarray(np.atleast_2d(radii), np.float64)
-    found, flux = np.zeros(radii.shape), np.zeros((*radii.shape, 3))
+    position = np.ascontiguousarray(position, np.float64)
+    normal = np.ascontiguousarray(normal, np.float32)
+    found, flux = out if out is not None else (np.empty(radii.shape), np.empty((*radii.shape, 3)))
     reach = radii.max(axis=0)
     ids = np.flatnonzero(reach > 0)
+    dead = np.flatnonzero(reach <= 0) if len(photons) else slice(None)  # the kernel's skip
+    found[:, dead], flux[:, dead] = 0.0, 0.0
     while len(ids) and len(photons):
         typical = float(np.median(reach[ids]))
         part = ids[reach[ids] <= SPREAD * typical]
-        f, x = np.zeros((len(radii), len(part))), np.zeros((len(radii), len(part), 3))
-        _disc_sums(photon_grid(photons, typical),
-                   np.ascontiguousarray(position[part], np.float64),
-                   np.ascontiguousarray(normal[part], np.float32),
-                   np.ascontiguousarray(radii[:, part]), f, x)  # fmt: skip
-        found[:, part], flux[:, part] = f, x
+        _disc_sums(photon_grid(photons, typical), position, normal, radii, part, found, flux)
         ids = ids[reach[ids] > SPREAD * typical]
     return found, flux
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
-def _disc_sums(grid, position, normal, radii, found, flux):
-    """`disc_sums` of the points (N, 3) at radii (S, N) into found (S, N) and flux (S, N, 3),
-    zeroed, from one grid whose cells are at least half the widest radius."""
+def _disc_sums(grid, position, normal, radii, rows, found, flux):
+    """`disc_sums` of the points rows (R,) of position (N, 3) at radii (S, N) into found
+    (S, N) and flux (S, N, 3), from one grid whose cells are at least half the widest radius
+    of those points (their entries are zeroed first; others are left alone)."""
     mask = len(grid.start) - 2
     cell = 2.0 * grid.radius
-    n, states = position.shape[0], radii.shape[0]
+    n, states = len(rows), radii.shape[0]
     for task in nb.prange((n + POINTS_PER_TASK - 1) // POINTS_PER_TASK):
         buckets = np.empty(MAX_BALL_CELLS, np.int64)
-        for i in range(task * POINTS_PER_TASK, min(n, (task + 1) * POINTS_PER_TASK)):
+        for j in range(task * POINTS_PER_TASK, min(n, (task + 1) * POINTS_PER_TASK)):
+            i = rows[j]
+            for k in range(states):
+                found[k, i] = 0.0
+                flux[k, i, 0] = flux[k, i, 1] = flux[k, i, 2] = 0.0
             reach = 0.0
             for k in range(states):
                 reach = max(reach, radii[k, i])
