@@ -445,8 +445,19 @@ def test_disc_sums_are_the_point_grids_pairs_summed(n_photons: int) -> None:
     finally:
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
     two = disc_sums(photons, position, normal, radii)
-    for found, summed in (one, two):
+    # into arrays kept from an earlier call (NaN here): every entry is written, those of a
+    # point of NaN radii too (as none); with no photons, all zero
+    kept = (np.full(radii.shape, np.nan), np.full((*radii.shape, 3), np.nan))
+    three = disc_sums(photons, position, normal, np.where(np.arange(400) == 7, np.nan, radii), kept)
+    assert three[0] is kept[0] and three[1] is kept[1]
+    assert not three[0][:, 7].any() and not three[1][:, 7].any()
+    for found, summed in (one, two, three):
         for k, (count, sums) in enumerate(expected):
-            np.testing.assert_array_equal(found[k], count)
-            np.testing.assert_allclose(summed[k], sums, rtol=1e-12, atol=1e-300)
+            rows = np.arange(400) != 7 if found is three[0] else np.arange(400) >= 0
+            np.testing.assert_array_equal(found[k][rows], count[rows])
+            np.testing.assert_allclose(summed[k][rows], sums[rows], rtol=1e-12, atol=1e-300)
     np.testing.assert_array_equal(one[1], two[1])
+    none = disc_sums(photons.select(np.zeros(len(photons), bool)), position, normal, radii, kept)
+    assert not none[0].any() and not none[1].any()
+    with pytest.raises(ValueError, match="out needs"):
+        disc_sums(photons, position, normal, radii, out=(kept[0][:1], kept[1]))

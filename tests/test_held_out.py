@@ -15,6 +15,7 @@ from test_density import (
     striped_photons,
 )
 
+from dpm.density import held_out
 from dpm.density.base import luminance
 from dpm.density.gather import PointIndex
 from dpm.density.held_out import KEEP, LADDER, NARROWER, HeldOutState, block_ids, half
@@ -106,13 +107,19 @@ def test_ppms_sums_point_by_point_are_its_pairs_summed(monkeypatch, per_pass: in
     points, photons = plane_points(16), striped_photons(20_000, seed=6)
     index = PointIndex(points.position, points.normal)
     radius = PPM().initial_radius(index, None, photons.split(2_000)[0])
-    runs = []
+    runs, calls, counted = [], [], []
+    spy = held_out.disc_sums
+    monkeypatch.setattr(held_out, "disc_sums", lambda *a, **k: calls.append(1) or spy(*a, **k))
     for sums in (True, False):
         monkeypatch.setattr(PPMState, "SUMS", sums)
         state = PPM().state(len(points), radius)
         for part in photons.split(per_pass)[:40]:
             state.add(index, part)
         runs.append(state)
+        counted.append(len(calls))
+    # the sums ran in the first run only, once per half that had paths in a pass
+    halves = 1 if per_pass == 1 else 2
+    assert counted == [halves * len(photons.split(per_pass)[:40])] * 2, counted
     a, b = runs
     assert (a.live, a.chosen(), a.passes, a.paths) == (b.live, b.chosen(), b.passes, b.paths)
     for run_a, run_b in zip(a.runs, b.runs, strict=True):

@@ -165,10 +165,14 @@ def disc_sums(
     radii = np.ascontiguousarray(np.atleast_2d(radii), np.float64)
     position = np.ascontiguousarray(position, np.float64)
     normal = np.ascontiguousarray(normal, np.float32)
-    found, flux = out if out is not None else (np.empty(radii.shape), np.empty((*radii.shape, 3)))
+    shapes = (radii.shape, (*radii.shape, 3))
+    found, flux = out if out is not None else (np.empty(shapes[0]), np.empty(shapes[1]))
+    for a, shape in zip((found, flux), shapes, strict=True):
+        if a.shape != shape or a.dtype != np.float64 or not a.flags.c_contiguous:
+            raise ValueError(f"disc_sums: out needs C-contiguous float64 arrays {shapes}")
     reach = radii.max(axis=0)
     ids = np.flatnonzero(reach > 0)
-    dead = np.flatnonzero(reach <= 0) if len(photons) else slice(None)  # the kernel's skip
+    dead = np.flatnonzero(~(reach > 0)) if len(photons) else slice(None)  # the kernel's skip
     found[:, dead], flux[:, dead] = 0.0, 0.0
     while len(ids) and len(photons):
         typical = float(np.median(reach[ids]))
